@@ -1,0 +1,50 @@
+"""Shared pytest configuration for the localize test suite."""
+
+import os
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent
+
+
+def data_dir() -> Path | None:
+    """The real robot data folder: $LOCALIZE_DATA, or ../shared/data beside the checkout."""
+    env = os.environ.get("LOCALIZE_DATA")
+    candidates = [Path(env)] if env else []
+    candidates.append(ROOT.parent / "shared" / "data")
+    for c in candidates:
+        if c.is_dir():
+            return c
+    return None
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def shared_data():
+    d = data_dir()
+    if d is None:
+        pytest.skip("real robot data not found: set LOCALIZE_DATA or place it at ../shared/data")
+    return d
+
+
+@pytest.fixture(autouse=True)
+def _doctest_namespace(doctest_namespace):
+    """Doctests in localize see numpy as ``np``."""
+    doctest_namespace["np"] = np
+
+
+# The book's .py files are jupytext twins of the notebooks, not modules:
+# keep --doctest-modules from importing (and so running) them. The homework
+# template is meant to fail until a student fills it in.
+collect_ignore_glob = ["book/*.py", "book/homework/*", "book/_build/*", "_build/*", "benchmarks/*", ".ci/*"]

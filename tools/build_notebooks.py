@@ -1,0 +1,58 @@
+"""Build executed notebooks from their jupytext percent scripts.
+
+    python tools/build_notebooks.py book/04_motion_models.py [more.py ...]
+    python tools/build_notebooks.py --all
+
+For each script: convert to .ipynb with jupytext, execute it top to bottom in
+the book/ folder with a fresh kernel (nbclient), and write the notebook with
+its outputs next to the script. The .py file is the source you edit; the
+.ipynb is generated, committed with outputs, and checked by ``pytest --nbval``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import jupytext
+import nbformat
+from nbclient import NotebookClient
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def build(py: Path, timeout: int = 900) -> float:
+    nb = jupytext.read(py)
+    nb.metadata["kernelspec"] = {"display_name": "Python 3 (ipykernel)", "language": "python", "name": "python3"}
+    nb.metadata.setdefault("jupytext", {})["formats"] = "ipynb,py:percent"
+    t0 = time.perf_counter()
+    NotebookClient(nb, timeout=timeout, kernel_name="python3",
+                   resources={"metadata": {"path": str(py.parent)}}).execute()
+    dt = time.perf_counter() - t0
+    # keep metadata minimal and machine-independent
+    nb.metadata.pop("widgets", None)
+    for cell in nb.cells:
+        cell.metadata.pop("execution", None)
+    out = py.with_suffix(".ipynb")
+    nbformat.write(nb, out)
+    return dt
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("scripts", nargs="*", type=Path)
+    ap.add_argument("--all", action="store_true", help="build every book/NN_*.py")
+    args = ap.parse_args(argv)
+    scripts = sorted((ROOT / "book").glob("[0-9][0-9]_*.py")) if args.all else args.scripts
+    if not scripts:
+        ap.error("give scripts or --all")
+    for s in scripts:
+        dt = build(Path(s).resolve())
+        print(f"{s}: executed in {dt:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
