@@ -4,6 +4,10 @@ import os
 
 import matplotlib
 
+# Notebook kernels started by nbval inherit this process's environment; an
+# MPLBACKEND=Agg set by a CI system would stop their inline figures from
+# appearing and make stored outputs differ. The kernel picks its own backend.
+os.environ.pop("MPLBACKEND", None)
 matplotlib.use("Agg")
 
 from pathlib import Path  # noqa: E402

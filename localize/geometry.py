@@ -59,6 +59,9 @@ def wrap_angle(angle: ArrayLike) -> NDArray[np.float64] | float:
     # np.remainder can round a tiny negative argument up to exactly 2*pi,
     # which would give +pi; fold that single value back.
     w = np.where(w >= np.pi, w - TWO_PI, w)
+    # Angles already inside the interval are returned untouched: the shift
+    # by pi and back would round those within one ulp of +pi to -pi.
+    w = np.where((a >= -np.pi) & (a < np.pi), a, w)
     if w.ndim == 0:
         return float(w)
     return w

@@ -38,8 +38,7 @@ def draw_map(grid: OccupancyGrid, ax=None, unknown_color: str = "#c9d6e8", **kwa
     import matplotlib.colors as mcolors
 
     _, ax = new_axes(ax)
-    cmap = mcolors.LinearSegmentedColormap.from_list("occ", ["white", "black"])
-    cmap.set_bad(unknown_color)
+    cmap = mcolors.LinearSegmentedColormap.from_list("occ", ["white", "black"]).with_extremes(bad=unknown_color)
     img = ax.imshow(np.ma.masked_invalid(grid.data), origin="lower", extent=grid.extent,
                     cmap=cmap, vmin=0.0, vmax=1.0, interpolation="nearest", **kwargs)
     ax.set_xlabel("x [m]")
