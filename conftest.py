@@ -14,6 +14,13 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from hypothesis import settings  # noqa: E402
+
+# Property tests are derandomised (the same examples on every run, like every
+# other seeded test here) and have no per-example deadline: this suite runs on
+# a shared 2-core machine, and speed is measured by benchmarks/, not by tests.
+settings.register_profile("localize", derandomize=True, deadline=None, print_blob=True)
+settings.load_profile("localize")
 
 ROOT = Path(__file__).resolve().parent
 
