@@ -55,13 +55,16 @@ def wrap_angle(angle: ArrayLike) -> NDArray[np.float64] | float:
     -3.141592653589793
     """
     a = np.asarray(angle, dtype=float)
-    w = np.remainder(a + np.pi, TWO_PI) - np.pi
-    # np.remainder can round a tiny negative argument up to exactly 2*pi,
-    # which would give +pi; fold that single value back.
-    w = np.where(w >= np.pi, w - TWO_PI, w)
+    # floor is much faster than np.remainder for large arrays
+    w = a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
+    w = np.atleast_1d(w)
+    # rounding can leave a value one ulp outside [-pi, pi): fold it back
+    w[w >= np.pi] -= TWO_PI
+    w[w < -np.pi] += TWO_PI
     # Angles already inside the interval are returned untouched: the shift
     # by pi and back would round those within one ulp of +pi to -pi.
-    w = np.where((a >= -np.pi) & (a < np.pi), a, w)
+    np.copyto(w, np.atleast_1d(a), where=np.atleast_1d((a >= -np.pi) & (a < np.pi)))
+    w = w.reshape(a.shape)
     if w.ndim == 0:
         return float(w)
     return w
