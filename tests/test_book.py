@@ -101,3 +101,15 @@ def test_readme_commands_present():
     text = (ROOT / "README.md").read_text()
     assert 'python -m pip install -e ".[book]" && jupyter lab book/' in text
     assert 'python -m pip install -e ".[test]" && pytest --nbval' in text
+
+
+@pytest.mark.parametrize("nb_path", NOTEBOOKS, ids=lambda p: p.name)
+def test_solutions_hidden_in_html_book(nb_path):
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tools"))
+    from hide_solutions import is_hidden
+
+    nb = jupytext.read(nb_path)
+    bad = [k for k, c in enumerate(nb.cells) if not is_hidden(c)]
+    assert not bad, f"{nb_path.name}: solution cells {bad} are not hidden; run python tools/hide_solutions.py"
