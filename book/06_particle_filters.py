@@ -5,6 +5,8 @@
 #     text_representation:
 #       extension: .py
 #       format_name: percent
+#       format_version: '1.3'
+#       jupytext_version: 1.19.6
 #   kernelspec:
 #     display_name: Python 3 (ipykernel)
 #     language: python
@@ -695,7 +697,7 @@ plt.show()
 #    multinomial instead of systematic resampling. What do you expect, and what
 #    do you see?
 
-# %% tags=["solution"]
+# %% tags=["solution", "hide-cell"]
 # Exercise 1
 w_ex = np.array([0.1, 0.2, 0.3, 0.4])
 print(f"(a) N_eff = 1 / sum w^2 = 1 / {np.sum(w_ex ** 2):.2f} = {1 / np.sum(w_ex ** 2):.4f}")
@@ -707,6 +709,9 @@ print(f"(c) multinomial: mean {4 * 0.4:.1f}, variance {4 * 0.4 * 0.6:.2f};"
       f" systematic: 1 or 2 copies, P(2) = 0.6 -> mean 1.6, variance {0.6 * 0.4:.2f}")
 
 # %% [markdown] tags=["solution"]
+# ````{admonition} Solution
+# :class: dropdown, tip
+#
 # (a) $\sum w_i^2 = 0.01 + 0.04 + 0.09 + 0.16 = 0.30$, so $N_\text{eff} = 3.33$.
 # The mean weight is $0.25$ and $\operatorname{Var}(w) = (0.0225 + 0.0025 + 0.0025 +
 # 0.0225)/4 = 0.0125$; $4/(1 + 16 \cdot 0.0125) = 4/1.2 = 3.33$.
@@ -720,8 +725,9 @@ print(f"(c) multinomial: mean {4 * 0.4:.1f}, variance {4 * 0.4 * 0.6:.2f};"
 # $N w (1 - w) = 0.96$. Systematic: pointers are $1/N$ apart and particle 3's
 # segment is $1.6/N$ long, so it holds one or two pointers; the mean must be 1.6,
 # so $P(2) = 0.6$, and the variance is $0.6 \cdot 0.4 = 0.24$, four times less.
+# ````
 
-# %% tags=["solution"]
+# %% tags=["solution", "hide-cell"]
 # Exercise 2
 def residual_fixed(weights, rng):
     w = np.asarray(weights, dtype=float)
@@ -743,7 +749,7 @@ z = np.abs(mean - 4 * w4) / np.sqrt(np.maximum(var, 1 / 20_000) / 20_000)
 print("mean offspring", mean.round(3), " expected", 4 * w4, " z-scores", z.round(2))
 print("unbiased (all z < 5):", bool(np.all(z < 5)))
 
-# %% tags=["solution"]
+# %% tags=["solution", "hide-cell"]
 # Exercise 3
 def tv_at(n, seed, resampler, k=10):
     rng_x = np.random.default_rng(seed)
@@ -766,8 +772,12 @@ fig.tight_layout()
 plt.show()
 
 # %% [markdown] tags=["solution"]
+# ````{admonition} Solution
+# :class: dropdown, tip
+#
 # Both lines have slopes near $-1/2$: Monte Carlo error shrinks like
 # $1/\sqrt{N}$ (for the smallest $N$ the distance saturates, which flattens the fit
 # a little). Multinomial resampling adds more noise at every step, so its line lies
 # above the systematic one by a roughly constant factor: the same accuracy costs
 # more particles. Choosing the resampler changes the constant, not the rate.
+# ````

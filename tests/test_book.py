@@ -113,3 +113,14 @@ def test_solutions_hidden_in_html_book(nb_path):
     nb = jupytext.read(nb_path)
     bad = [k for k, c in enumerate(nb.cells) if not is_hidden(c)]
     assert not bad, f"{nb_path.name}: solution cells {bad} are not hidden; run python tools/hide_solutions.py"
+
+
+@pytest.mark.parametrize("nb_path", NOTEBOOKS, ids=lambda p: p.name)
+def test_no_volatile_output_stored(nb_path):
+    """Cells whose output is volatile (timings) store none and are not compared by nbval."""
+    nb = json.loads(nb_path.read_text())
+    for k, c in enumerate(nb["cells"]):
+        tags = c.get("metadata", {}).get("tags", [])
+        if "remove-output" in tags and c["cell_type"] == "code":
+            assert not c.get("outputs"), f"{nb_path.name} cell {k}: remove-output cell stores output"
+            assert "nbval-ignore-output" in tags, f"{nb_path.name} cell {k}: tag it nbval-ignore-output too"

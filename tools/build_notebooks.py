@@ -23,6 +23,18 @@ from nbclient import NotebookClient
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def strip_volatile(cell) -> None:
+    """Drop the stored outputs of cells tagged ``remove-output`` (e.g. wall-clock timings).
+
+    Such output is not part of the book (the HTML build removes it too); a
+    reader who runs the notebook sees it live. The cell must also carry
+    ``nbval-ignore-output`` so that ``pytest --nbval`` does not compare it.
+    """
+    tags = cell.get("metadata", {}).get("tags", [])
+    if cell.get("cell_type") == "code" and "remove-output" in tags:
+        cell["outputs"] = []
+
+
 def build(py: Path, timeout: int = 900) -> float:
     nb = jupytext.read(py)
     nb.metadata["kernelspec"] = {"display_name": "Python 3 (ipykernel)", "language": "python", "name": "python3"}
@@ -35,6 +47,7 @@ def build(py: Path, timeout: int = 900) -> float:
     nb.metadata.pop("widgets", None)
     for cell in nb.cells:
         cell.metadata.pop("execution", None)
+        strip_volatile(cell)
     out = py.with_suffix(".ipynb")
     nbformat.write(nb, out)
     return dt

@@ -2,6 +2,7 @@
 
     python tools/hide_solutions.py            # update book/NN_*.py and .ipynb in place
     python tools/hide_solutions.py --check    # exit 1 if a solution is not hidden
+    python tools/hide_solutions.py 06_particle   # only the chapters whose names contain this
 
 Cells tagged ``solution`` are made collapsible in the Jupyter Book build:
 
@@ -58,7 +59,10 @@ def is_hidden(cell) -> bool:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     bad = []
+    only = [a for a in argv if not a.startswith("--")]
     for nb_path in sorted((ROOT / "book").glob("[0-9][0-9]_*.ipynb")):
+        if only and not any(o in nb_path.name for o in only):
+            continue
         py_path = nb_path.with_suffix(".py")
         nb = nbformat.read(nb_path, as_version=4)
         if "--check" in argv:

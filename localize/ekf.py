@@ -1,0 +1,889 @@
+"""Gaussian landmark localization: the EKF and the UKF, built on filterpy.
+
+A robot moves with the velocity motion model (or the odometry model) and
+observes landmarks at known positions with a range-bearing sensor. The
+belief is one Gaussian ``N(mu, Sigma)`` over the pose ``(x, y, theta)``.
+
+* :class:`EKFLocalizer` is EKF localization with known correspondences,
+  *Probabilistic Robotics* (Thrun, Burgard and Fox 2005, "PR") table 7.2, on
+  :class:`filterpy.kalman.ExtendedKalmanFilter`, with the analytic Jacobians
+  of this module (:func:`velocity_jacobians`, :func:`odometry_jacobians`,
+  :func:`landmark_jacobian`). Without ids it associates each sighting with
+  the most likely landmark, as in PR table 7.3.
+* :class:`UKFLocalizer` is the same problem on
+  :class:`filterpy.kalman.UnscentedKalmanFilter` with angle-aware mean and
+  residual functions (the heading and the bearings are averaged as unit
+  vectors and differenced modulo ``2*pi``). Unlike PR table 7.4 the control
+  noise enters additively, mapped to state space by the motion Jacobian.
+* :func:`ekf_localization_known_correspondences` is the readable version of
+  table 7.2 (plain numpy, a loop over sightings): the test oracle of the
+  filterpy-based class.
+
+Noise parameters follow PR: the velocity model's ``alphas = (a1..a6)`` give
+the variances ``a1*v**2 + a2*w**2`` of the translational velocity,
+``a3*v**2 + a4*w**2`` of the rotational velocity and ``a5*v**2 + a6*w**2`` of
+the final rotation rate ``gamma`` (PR table 5.3; table 7.2 omits gamma, we
+add its variance ``(a5*v**2 + a6*w**2) * dt**2`` to the heading). The
+odometry model's ``alphas = (a1..a4)`` are those of PR table 5.6.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+from numpy.typing import ArrayLike, NDArray
+
+from . import motion as _motion
+from .geometry import as_poses, wrap_angle
+
+__all__ = [
+    "velocity_motion",
+    "velocity_jacobians",
+    "velocity_noise",
+    "odometry_controls",
+    "odometry_motion",
+    "odometry_jacobians",
+    "odometry_noise",
+    "landmark_measurement",
+    "landmark_jacobian",
+    "numerical_jacobian",
+    "ekf_localization_known_correspondences",
+    "EKFLocalizer",
+    "UKFLocalizer",
+]
+
+_SMALL = 1e-3  # below this |s| the sinc helpers use their Taylor series
+
+
+# ----------------------------------------------------------------------------
+# small checked-input helpers
+# ----------------------------------------------------------------------------
+
+
+def _positive(value: float, name: str) -> float:
+    v = float(value)
+    if not np.isfinite(v) or v <= 0:
+        raise ValueError(f"{name} must be a finite number > 0; got {value!r}")
+    return v
+
+
+def _alphas(alphas: ArrayLike, n: int, name: str = "alphas") -> NDArray[np.float64]:
+    a = np.asarray(alphas, dtype=float)
+    if a.shape != (n,):
+        raise ValueError(f"{name} must hold {n} noise parameters (PR convention); got shape {a.shape}")
+    if np.any(~np.isfinite(a)) or np.any(a < 0):
+        raise ValueError(f"{name} must be finite and >= 0; got {a.tolist()}")
+    return a
+
+
+def _control(u: ArrayLike, n: int, name: str = "u") -> NDArray[np.float64]:
+    c = np.asarray(u, dtype=float)
+    if c.shape != (n,) or np.any(~np.isfinite(c)):
+        raise ValueError(f"{name} must be {n} finite numbers; got {np.asarray(u).tolist()!r}")
+    return c
+
+
+def _pose(pose: ArrayLike, name: str = "pose") -> NDArray[np.float64]:
+    p = as_poses(pose, name)
+    if p.shape != (3,):
+        raise ValueError(f"{name} must be a single pose of shape (3,); got shape {p.shape}")
+    return p
+
+
+def _sinc(s: NDArray) -> NDArray:
+    """sin(s)/s, exact at 0."""
+    return np.sinc(s / np.pi)
+
+
+def _dsinc(s: NDArray) -> NDArray:
+    """Derivative of sin(s)/s, stable near 0 (Taylor: -s/3 + s**3/30)."""
+    s = np.asarray(s, dtype=float)
+    small = np.abs(s) < _SMALL
+    safe = np.where(small, 1.0, s)
+    exact = (np.cos(safe) - np.sin(safe) / safe) / safe
+    return np.where(small, -s / 3.0 + s**3 / 30.0, exact)
+
+
+# ----------------------------------------------------------------------------
+# motion models: mean and Jacobians
+# ----------------------------------------------------------------------------
+
+
+def velocity_motion(poses: ArrayLike, u: ArrayLike, dt: float) -> NDArray[np.float64]:
+    """Noise-free velocity motion model ``g(u, x)`` (PR table 7.2, line 6).
+
+    The robot follows a circular arc with translational velocity ``v`` and
+    rotational velocity ``w`` for ``dt`` seconds. Written as
+    ``x + v*dt*cos(theta + w*dt/2) * sinc(w*dt/2)``, which equals the
+    textbook ``x - v/w*sin(theta) + v/w*sin(theta + w*dt)`` and stays exact for
+    straight motion (``w = 0``); computed by :func:`localize.motion.move_velocity`.
+
+    Parameters
+    ----------
+    poses : array_like, shape (..., 3)
+    u : array_like, shape (2,)
+        ``(v, w)`` in m/s and rad/s.
+    dt : float
+        Time step in seconds, > 0.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        The moved poses, heading wrapped to ``[-pi, pi)``.
+
+    Examples
+    --------
+    >>> velocity_motion([0.0, 0.0, 0.0], [1.0, np.pi / 2], 1.0).round(6)   # quarter circle
+    array([0.63662 , 0.63662 , 1.570796])
+    >>> velocity_motion([0.0, 0.0, 0.0], [1.0, 0.0], 2.0).round(6)
+    array([2., 0., 0.])
+    """
+    p = as_poses(poses)
+    v, w = _control(u, 2)
+    return _motion.move_velocity(p, v, w, _positive(dt, "dt"))
+
+
+def velocity_jacobians(pose: ArrayLike, u: ArrayLike, dt: float) -> tuple[NDArray, NDArray]:
+    """Jacobians of :func:`velocity_motion`: ``G = dg/dx`` (3x3) and ``V = dg/du`` (3x2).
+
+    These are PR table 7.2, lines 4 and 5, in a form that is also valid for
+    ``w = 0`` (the textbook expressions divide by ``w``).
+
+    Examples
+    --------
+    >>> G, V = velocity_jacobians([0.0, 0.0, 0.0], [1.0, 0.0], 1.0)
+    >>> G.round(6) + 0.0
+    array([[1., 0., 0.],
+           [0., 1., 1.],
+           [0., 0., 1.]])
+    >>> V.round(6)
+    array([[1. , 0. ],
+           [0. , 0.5],
+           [0. , 1. ]])
+    """
+    x, y, th = _pose(pose)
+    v, w = _control(u, 2)
+    dt = _positive(dt, "dt")
+    half = 0.5 * w * dt
+    s, ds = float(_sinc(np.asarray(half))), float(_dsinc(half))
+    c, sn = np.cos(th + half), np.sin(th + half)
+    G = np.array([[1.0, 0.0, -v * dt * s * sn],
+                  [0.0, 1.0, v * dt * s * c],
+                  [0.0, 0.0, 1.0]])
+    # d/dw of v*dt*s(half)*cos(th+half) with d half/dw = dt/2
+    V = np.array([[dt * s * c, v * dt * 0.5 * dt * (ds * c - s * sn)],
+                  [dt * s * sn, v * dt * 0.5 * dt * (ds * sn + s * c)],
+                  [0.0, dt]])
+    return G, V
+
+
+def velocity_noise(u: ArrayLike, dt: float, alphas: ArrayLike) -> NDArray[np.float64]:
+    """Covariance ``M`` of the noisy controls ``(v, w)`` (PR table 7.2, line 7).
+
+    ``M = diag(a1*v**2 + a2*w**2, a3*v**2 + a4*w**2)``. The filters map it to
+    state space as ``V M V^T`` and add the final-rotation noise of PR table
+    5.3, ``(a5*v**2 + a6*w**2) * dt**2``, to the heading variance.
+
+    Parameters
+    ----------
+    u : array_like, shape (2,)
+        ``(v, w)``.
+    dt : float
+        Time step, > 0 (checked; ``M`` itself does not depend on it).
+    alphas : array_like, shape (6,)
+
+    Returns
+    -------
+    ndarray, shape (2, 2)
+
+    Examples
+    --------
+    >>> velocity_noise([1.0, 0.5], 1.0, [0.1, 0.0, 0.0, 0.2, 0, 0]).round(6)
+    array([[0.1 , 0.  ],
+           [0.  , 0.05]])
+    """
+    v, w = _control(u, 2)
+    _positive(dt, "dt")
+    var_v, var_w, _ = _motion.velocity_variances(v, w, _alphas(alphas, 6))
+    return np.diag([float(var_v), float(var_w)])
+
+
+def _velocity_process_cov(pose: NDArray, u: NDArray, dt: float, alphas: NDArray) -> tuple[NDArray, NDArray]:
+    G, V = velocity_jacobians(pose, u, dt)
+    M = velocity_noise(u, dt, alphas)
+    Q = V @ M @ V.T
+    _, _, var_gamma = _motion.velocity_variances(u[0], u[1], alphas)
+    Q[2, 2] += float(var_gamma) * dt**2
+    return G, Q
+
+
+def odometry_controls(u: ArrayLike) -> NDArray[np.float64]:
+    """Turn an odometry pair ``(prev_odom, odom)`` into ``(rot1, trans, rot2)`` (PR table 5.6).
+
+    Delegates to :func:`localize.motion.odometry_to_control`. A 3-vector is taken to be ``(rot1, trans, rot2)`` already.
+
+    Examples
+    --------
+    >>> odometry_controls([[0.0, 0.0, 0.0], [1.0, 1.0, np.pi / 2]]).round(6)
+    array([0.785398, 1.414214, 0.785398])
+    """
+    a = np.asarray(u, dtype=float)
+    if a.shape == (3,):
+        if np.any(~np.isfinite(a)):
+            raise ValueError(f"u must be finite; got {a.tolist()}")
+        return a
+    if a.shape != (2, 3) or np.any(~np.isfinite(a)):
+        raise ValueError(f"u must be (prev_odom, odom), shape (2, 3), or (rot1, trans, rot2); got shape {a.shape}")
+    return np.array(_motion.odometry_to_control(a[0], a[1]), dtype=float)
+
+
+def odometry_motion(poses: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
+    """Noise-free odometry motion: turn ``rot1``, drive ``trans``, turn ``rot2``.
+
+    ``u`` is ``(rot1, trans, rot2)`` or an odometry pair; the motion is
+    :func:`localize.motion.move_odometry`.
+
+    Examples
+    --------
+    >>> odometry_motion([1.0, 0.0, np.pi / 2], [0.0, 2.0, -np.pi / 2]).round(6)
+    array([1., 2., 0.])
+    """
+    r1, tr, r2 = odometry_controls(u)
+    return _motion.move_odometry(as_poses(poses), r1, tr, r2)
+
+
+def odometry_jacobians(pose: ArrayLike, u: ArrayLike) -> tuple[NDArray, NDArray]:
+    """Jacobians of :func:`odometry_motion`: ``G`` (3x3) and ``V = d/d(rot1, trans, rot2)`` (3x3).
+
+    Examples
+    --------
+    >>> G, V = odometry_jacobians([0.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    >>> G[:, 2].round(6), V[:, 0].round(6)
+    (array([0., 1., 1.]), array([0., 1., 1.]))
+    """
+    _, _, th = _pose(pose)
+    r1, tr, _ = odometry_controls(u)
+    c, s = np.cos(th + r1), np.sin(th + r1)
+    G = np.array([[1.0, 0.0, -tr * s], [0.0, 1.0, tr * c], [0.0, 0.0, 1.0]])
+    V = np.array([[-tr * s, c, 0.0], [tr * c, s, 0.0], [1.0, 0.0, 1.0]])
+    return G, V
+
+
+def odometry_noise(u: ArrayLike, alphas: ArrayLike) -> NDArray[np.float64]:
+    """Covariance ``M`` of ``(rot1, trans, rot2)`` in the odometry model (PR table 5.6).
+
+    Variances ``a1*rot1**2 + a2*trans**2``, ``a3*trans**2 + a4*(rot1**2 + rot2**2)``
+    and ``a1*rot2**2 + a2*trans**2``.
+
+    Examples
+    --------
+    >>> np.diag(odometry_noise([0.5, 1.0, 0.0], [0.1, 0.01, 0.02, 0.1])).round(6)
+    array([0.035, 0.045, 0.01 ])
+    """
+    r1, tr, r2 = odometry_controls(u)
+    return np.diag([float(v) for v in _motion.odometry_variances(r1, tr, r2, _alphas(alphas, 4))])
+
+
+# ----------------------------------------------------------------------------
+# the range-bearing measurement
+# ----------------------------------------------------------------------------
+
+
+def landmark_measurement(poses: ArrayLike, landmark: ArrayLike) -> NDArray[np.float64]:
+    """Expected range and bearing of one landmark, ``h(x, m)`` (PR table 7.2, line 12).
+
+    Parameters
+    ----------
+    poses : array_like, shape (..., 3)
+    landmark : array_like, shape (2,)
+        Landmark position ``(m_x, m_y)``.
+
+    Returns
+    -------
+    ndarray, shape (..., 2)
+        ``(range, bearing)``, bearing relative to the robot's heading in ``[-pi, pi)``.
+
+    Examples
+    --------
+    >>> landmark_measurement([0.0, 0.0, np.pi / 2], [3.0, 4.0]).round(6)
+    array([ 5.      , -0.643501])
+    """
+    p = as_poses(poses)
+    m = np.asarray(landmark, dtype=float)
+    if m.shape != (2,) or np.any(~np.isfinite(m)):
+        raise ValueError(f"landmark must be a finite (x, y) pair; got {np.asarray(landmark).tolist()!r}")
+    dx, dy = m[0] - p[..., 0], m[1] - p[..., 1]
+    r = np.hypot(dx, dy)
+    b = wrap_angle(np.arctan2(dy, dx) - p[..., 2])
+    return np.stack(np.broadcast_arrays(r, b), axis=-1)
+
+
+def landmark_jacobian(pose: ArrayLike, landmark: ArrayLike) -> NDArray[np.float64]:
+    """Jacobian ``H = dh/dx`` (2x3) of the range-bearing measurement (PR table 7.2, line 13).
+
+    ``H = [[-dx/r, -dy/r, 0], [dy/q, -dx/q, -1]]`` with ``q = r**2``.
+
+    Raises
+    ------
+    ValueError
+        When the pose sits on the landmark (the bearing is undefined there).
+
+    Examples
+    --------
+    >>> landmark_jacobian([0.0, 0.0, 0.0], [3.0, 4.0]).round(6)
+    array([[-0.6 , -0.8 ,  0.  ],
+           [ 0.16, -0.12, -1.  ]])
+    """
+    x, y, _ = _pose(pose)
+    m = np.asarray(landmark, dtype=float)
+    if m.shape != (2,):
+        raise ValueError(f"landmark must be an (x, y) pair; got shape {m.shape}")
+    dx, dy = m[0] - x, m[1] - y
+    q = dx * dx + dy * dy
+    if q < 1e-18:
+        raise ValueError(f"pose {pose!r} coincides with landmark {m.tolist()}: the bearing Jacobian is undefined")
+    r = np.sqrt(q)
+    return np.array([[-dx / r, -dy / r, 0.0], [dy / q, -dx / q, -1.0]])
+
+
+def numerical_jacobian(f, x: ArrayLike, eps: float = 1e-6, angle_rows: tuple[int, ...] = ()) -> NDArray[np.float64]:
+    """Central-difference Jacobian of ``f`` at ``x``; rows in ``angle_rows`` are wrapped.
+
+    Used by the tests to check the analytic Jacobians of this module.
+
+    Examples
+    --------
+    >>> numerical_jacobian(lambda p: landmark_measurement(p, [3.0, 4.0]), [0.0, 0.0, 0.0],
+    ...                    angle_rows=(1,)).round(6)
+    array([[-0.6 , -0.8 ,  0.  ],
+           [ 0.16, -0.12, -1.  ]])
+    """
+    x = np.asarray(x, dtype=float)
+    eps = _positive(eps, "eps")
+    cols = []
+    for i in range(x.size):
+        d = np.zeros_like(x)
+        d[i] = eps
+        diff = np.asarray(f(x + d), dtype=float) - np.asarray(f(x - d), dtype=float)
+        for r in angle_rows:
+            diff[r] = wrap_angle(diff[r])
+        cols.append(diff / (2 * eps))
+    return np.stack(cols, axis=-1)
+
+
+# ----------------------------------------------------------------------------
+# the readable algorithm (the test oracle)
+# ----------------------------------------------------------------------------
+
+
+def ekf_localization_known_correspondences(
+    mu: ArrayLike, Sigma: ArrayLike, u: ArrayLike, z: ArrayLike, ids: ArrayLike, landmarks: ArrayLike,
+    alphas: ArrayLike, sigma_range: float, sigma_bearing: float, dt: float = 1.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """EKF localization with known correspondences, PR table 7.2, line by line.
+
+    The readable version: the velocity model with the textbook ``v/w``
+    formulas (``w`` must be nonzero), then one Kalman update per sighting.
+    :class:`EKFLocalizer` is tested against it.
+
+    Parameters
+    ----------
+    mu, Sigma : array_like, shapes (3,), (3, 3)
+        Prior mean and covariance.
+    u : array_like, shape (2,)
+        ``(v, w)``, ``w != 0``.
+    z : array_like, shape (K, 2)
+        Range-bearing sightings.
+    ids : array_like of int, shape (K,)
+        Which landmark each sighting is of (the correspondences ``c``).
+    landmarks : array_like, shape (L, 2)
+    alphas : array_like, shape (6,)
+    sigma_range, sigma_bearing : float
+    dt : float
+
+    Returns
+    -------
+    (mu, Sigma) : the posterior.
+
+    Examples
+    --------
+    >>> mu, S = ekf_localization_known_correspondences(
+    ...     [0, 0, 0], np.eye(3) * 0.1, [1.0, 0.1], [[4.0, 0.9]], [0], [[3.0, 3.0]],
+    ...     [0.1] * 4 + [0, 0], 0.2, 0.05)
+    >>> mu.round(3), bool(np.trace(S) < 0.3)
+    (array([ 0.715, -0.181,  0.043]), True)
+    """
+    mu = np.asarray(mu, dtype=float)
+    Sigma = np.asarray(Sigma, dtype=float)
+    v, w = _control(u, 2)
+    if w == 0:
+        raise ValueError("u[1] (w) must be nonzero in the textbook formulas; use EKFLocalizer for w = 0")
+    a = _alphas(alphas, 6)
+    th = mu[2]
+    # lines 2-5: Jacobians of g with respect to the state and the control
+    G = np.array([[1, 0, -v / w * np.cos(th) + v / w * np.cos(th + w * dt)],
+                  [0, 1, -v / w * np.sin(th) + v / w * np.sin(th + w * dt)],
+                  [0, 0, 1]])
+    V = np.array([
+        [(-np.sin(th) + np.sin(th + w * dt)) / w,
+         v * (np.sin(th) - np.sin(th + w * dt)) / w**2 + v * np.cos(th + w * dt) * dt / w],
+        [(np.cos(th) - np.cos(th + w * dt)) / w,
+         -v * (np.cos(th) - np.cos(th + w * dt)) / w**2 + v * np.sin(th + w * dt) * dt / w],
+        [0, dt]])
+    # line 7: control noise
+    M = np.diag([a[0] * v**2 + a[1] * w**2, a[2] * v**2 + a[3] * w**2])
+    # line 8-9: predicted mean and covariance
+    mu = mu + np.array([-v / w * np.sin(th) + v / w * np.sin(th + w * dt),
+                        v / w * np.cos(th) - v / w * np.cos(th + w * dt),
+                        w * dt])
+    Sigma = G @ Sigma @ G.T + V @ M @ V.T
+    Sigma[2, 2] += (a[4] * v**2 + a[5] * w**2) * dt**2   # PR table 5.3's final rotation
+    # line 10: measurement noise
+    Q = np.diag([sigma_range**2, sigma_bearing**2])
+    lms = np.asarray(landmarks, dtype=float)
+    # lines 11-19: one update per observed feature
+    for zi, j in zip(np.asarray(z, dtype=float).reshape(-1, 2), np.asarray(ids, dtype=int).reshape(-1)):
+        dx, dy = lms[j, 0] - mu[0], lms[j, 1] - mu[1]
+        q = dx**2 + dy**2
+        z_hat = np.array([np.sqrt(q), np.arctan2(dy, dx) - mu[2]])
+        H = np.array([[-dx / np.sqrt(q), -dy / np.sqrt(q), 0], [dy / q, -dx / q, -1]])
+        S = H @ Sigma @ H.T + Q
+        K = Sigma @ H.T @ np.linalg.inv(S)
+        innov = zi - z_hat
+        innov[1] = wrap_angle(innov[1])
+        mu = mu + K @ innov
+        Sigma = (np.eye(3) - K @ H) @ Sigma
+    mu[2] = wrap_angle(mu[2])
+    return mu, Sigma
+
+
+# ----------------------------------------------------------------------------
+# filterpy-based filters
+# ----------------------------------------------------------------------------
+
+
+class _PoseEKF(ExtendedKalmanFilter):
+    """filterpy's EKF with a nonlinear state transition ``g`` instead of ``F x + B u``."""
+
+    g = None  # set before each predict
+
+    def predict_x(self, u=0):
+        self.x = self.g(self.x)
+
+
+_TWO_PI = 2.0 * np.pi
+
+
+def _wrap(a):
+    """Fast wrap to [-pi, pi) for the filters' inner loops (no input checks)."""
+    return np.mod(a + np.pi, _TWO_PI) - np.pi
+
+
+def _h(x, m) -> NDArray[np.float64]:
+    """Unchecked range-bearing of landmark ``m`` from pose ``x`` (inner-loop version)."""
+    dx, dy = m[0] - x[0], m[1] - x[1]
+    return np.array([np.hypot(dx, dy), _wrap(np.arctan2(dy, dx) - x[2])])
+
+
+def _H(x, m) -> NDArray[np.float64] | None:
+    """Unchecked Jacobian of :func:`_h`; None when the pose is on the landmark."""
+    dx, dy = m[0] - x[0], m[1] - x[1]
+    q = dx * dx + dy * dy
+    if q < 1e-18:
+        return None
+    r = np.sqrt(q)
+    return np.array([[-dx / r, -dy / r, 0.0], [dy / q, -dx / q, -1.0]])
+
+
+def _residual_z(a, b):
+    d = np.array(a, dtype=float) - b
+    flat = d.reshape(-1)
+    flat[1::2] = _wrap(flat[1::2])
+    return d
+
+
+def _residual_x(a, b):
+    d = np.array(a, dtype=float) - b
+    flat = d.reshape(-1)
+    flat[2] = _wrap(flat[2])
+    return d
+
+
+def _state_mean(sigmas, Wm):
+    x = np.dot(Wm, sigmas[:, 0])
+    y = np.dot(Wm, sigmas[:, 1])
+    t = np.arctan2(np.dot(Wm, np.sin(sigmas[:, 2])), np.dot(Wm, np.cos(sigmas[:, 2])))
+    return np.array([x, y, t])
+
+
+def _z_mean(sigmas, Wm):
+    z = np.empty(sigmas.shape[1])
+    z[0::2] = Wm @ sigmas[:, 0::2]
+    z[1::2] = np.arctan2(Wm @ np.sin(sigmas[:, 1::2]), Wm @ np.cos(sigmas[:, 1::2]))
+    return z
+
+
+class _VectorUKF(UnscentedKalmanFilter):
+    """filterpy's UKF with the motion model applied to all sigma points in one call."""
+
+    def compute_process_sigmas(self, dt, fx=None, **fx_args):
+        if fx is None:
+            fx = self.fx
+        sigmas = self.points_fn.sigma_points(self.x, self.P)
+        self.sigmas_f = np.asarray(fx(sigmas, dt, **fx_args), dtype=float)
+
+
+class _GaussianLocalizer:
+    """Shared set-up, checks and accessors of the EKF and the UKF."""
+
+    def __init__(self, landmarks, sigma_range, sigma_bearing, alphas, motion, dt, mean, cov):
+        lms = np.asarray(landmarks, dtype=float)
+        if lms.ndim != 2 or lms.shape[1] != 2 or lms.shape[0] < 1 or np.any(~np.isfinite(lms)):
+            raise ValueError(f"landmarks must be a finite (L, 2) array with L >= 1; got shape {lms.shape}")
+        self.landmarks = lms
+        self.sigma_range = _positive(sigma_range, "sigma_range")
+        self.sigma_bearing = _positive(sigma_bearing, "sigma_bearing")
+        if motion not in ("velocity", "odometry"):
+            raise ValueError(f"motion must be 'velocity' or 'odometry'; got {motion!r}")
+        self.motion = motion
+        self.alphas = _alphas(alphas, 6 if motion == "velocity" else 4)
+        self.dt = _positive(dt, "dt")
+        self.R1 = np.diag([self.sigma_range**2, self.sigma_bearing**2])
+
+    @staticmethod
+    def _check_belief(mean, cov):
+        m = _pose(mean, "mean").copy()
+        m[2] = wrap_angle(m[2])
+        c = np.asarray(cov, dtype=float)
+        if c.shape != (3, 3) or np.any(~np.isfinite(c)):
+            raise ValueError(f"cov must be a finite (3, 3) matrix; got shape {c.shape}")
+        if not np.allclose(c, c.T, atol=1e-12) or np.min(np.linalg.eigvalsh(c)) <= 0:
+            raise ValueError("cov must be symmetric positive definite")
+        return m, c
+
+    def _process(self, u):
+        """Mean function, Jacobian G and state-space process covariance for control ``u``."""
+        mean = self.mean
+        if self.motion == "velocity":
+            uu = _control(u, 2)
+            G, Q = _velocity_process_cov(mean, uu, self.dt, self.alphas)
+            return (lambda x: velocity_motion(x, uu, self.dt)), G, Q
+        uu = odometry_controls(u)
+        G, V = odometry_jacobians(mean, uu)
+        Q = V @ odometry_noise(uu, self.alphas) @ V.T
+        return (lambda x: odometry_motion(x, uu)), G, Q
+
+    def _sightings(self, z, ids):
+        zz = np.asarray(z, dtype=float).reshape(-1, 2) if np.size(z) else np.zeros((0, 2))
+        if np.any(~np.isfinite(zz)):
+            raise ValueError("z must be finite (range, bearing) pairs")
+        if ids is None:
+            return zz, None
+        ii = np.asarray(ids).reshape(-1)
+        if ii.shape[0] != zz.shape[0]:
+            raise ValueError(f"ids must have one entry per sighting ({zz.shape[0]}); got {ii.shape[0]}")
+        if ii.size and (not np.issubdtype(ii.dtype, np.integer) or ii.min() < 0 or ii.max() >= len(self.landmarks)):
+            raise ValueError(f"ids must be integers in [0, {len(self.landmarks) - 1}]; got {ii.tolist()}")
+        return zz, ii.astype(int)
+
+    def associate(self, z: ArrayLike) -> NDArray[np.int64]:
+        """Maximum-likelihood data association (PR table 7.3, lines 11-18).
+
+        For each sighting pick the landmark whose predicted measurement, with
+        innovation covariance ``S = H Sigma H^T + Q``, makes it most likely.
+
+        Examples
+        --------
+        >>> f = EKFLocalizer([[5, 0], [0, 5]], 0.1, 0.05, [0.01] * 6, cov=np.eye(3) * 0.01)
+        >>> f.associate([[5.0, 1.57], [5.0, 0.0]]).tolist()
+        [1, 0]
+        """
+        zz, _ = self._sightings(z, None)
+        if len(zz) == 0:
+            return np.zeros(0, dtype=np.int64)
+        x, P = self.mean, self.cov
+        d = self.landmarks - x[:2]                                      # (L, 2)
+        q = np.maximum((d * d).sum(axis=1), 1e-18)
+        r = np.sqrt(q)
+        zhat = np.stack([r, _wrap(np.arctan2(d[:, 1], d[:, 0]) - x[2])], axis=1)   # (L, 2)
+        H = np.zeros((len(d), 2, 3))                                    # the Jacobians of all landmarks
+        H[:, 0, 0], H[:, 0, 1] = -d[:, 0] / r, -d[:, 1] / r
+        H[:, 1, 0], H[:, 1, 1], H[:, 1, 2] = d[:, 1] / q, -d[:, 0] / q, -1.0
+        S = H @ P @ H.transpose(0, 2, 1) + self.R1                      # (L, 2, 2)
+        Sinv = np.linalg.inv(S)
+        logdet = np.log(np.linalg.det(S))
+        e = zz[:, None, :] - zhat[None]                                 # (K, L, 2)
+        e[..., 1] = _wrap(e[..., 1])
+        ll = -0.5 * (np.einsum("kli,lij,klj->kl", e, Sinv, e) + logdet)
+        return np.argmax(ll, axis=1).astype(np.int64)
+
+    def associate_loop(self, z: ArrayLike) -> NDArray[np.int64]:
+        """Readable version of :meth:`associate` (PR table 7.3's loops); the test oracle."""
+        zz, _ = self._sightings(z, None)
+        out = np.empty(len(zz), dtype=np.int64)
+        mean, cov = self.mean, self.cov
+        for k, zk in enumerate(zz):
+            best, best_ll = 0, -np.inf
+            for j, m in enumerate(self.landmarks):
+                H = _H(mean, m)
+                if H is None:
+                    continue
+                S = H @ cov @ H.T + self.R1
+                e = _residual_z(zk, _h(mean, m))
+                ll = -0.5 * (e @ np.linalg.solve(S, e) + np.log(np.linalg.det(S)))
+                if ll > best_ll:
+                    best, best_ll = j, ll
+            out[k] = best
+        return out
+
+    def estimate(self) -> NDArray[np.float64]:
+        """The mean pose ``(x, y, theta)``."""
+        return self.mean
+
+    def step(self, u: ArrayLike, z: ArrayLike, ids: ArrayLike | None = None) -> NDArray[np.float64]:
+        """``predict(u)`` then ``update(z, ids)``; returns the new mean."""
+        self.predict(u)
+        self.update(z, ids)
+        return self.mean
+
+
+class EKFLocalizer(_GaussianLocalizer):
+    """EKF landmark localization (PR table 7.2) on filterpy's ``ExtendedKalmanFilter``.
+
+    Parameters
+    ----------
+    landmarks : array_like, shape (L, 2)
+        Known landmark positions.
+    sigma_range, sigma_bearing : float
+        Standard deviations of the range (m) and bearing (rad) noise.
+    alphas : array_like
+        Motion noise in the PR convention: 6 values for ``motion="velocity"``,
+        4 for ``motion="odometry"`` (see the module docstring).
+    motion : {"velocity", "odometry"}
+        Control ``u`` is ``(v, w)`` for the velocity model, or the odometry
+        pair ``(prev_odom, odom)`` (or ``(rot1, trans, rot2)``) for the odometry model.
+    dt : float
+        Time step of the velocity model, s.
+    mean, cov : array_like
+        Initial belief, ``(3,)`` and ``(3, 3)`` symmetric positive definite
+        (default: the origin with identity covariance).
+
+    Attributes
+    ----------
+    kf : filterpy.kalman.ExtendedKalmanFilter
+        The underlying filterpy object (``kf.x`` is a ``(3, 1)`` column).
+
+    Examples
+    --------
+    >>> lms = [[5.0, 0.0], [0.0, 5.0], [-5.0, 0.0]]
+    >>> ekf = EKFLocalizer(lms, 0.1, 0.02, [0.05] * 4 + [0.0, 0.0], dt=1.0,
+    ...                    mean=[0.0, 0.0, 0.0], cov=np.diag([0.5, 0.5, 0.1]))
+    >>> ekf.predict([1.0, 0.0])
+    >>> ekf.update([[4.0, 0.0], [5.099, 1.7682]], ids=[0, 1])
+    >>> ekf.mean.round(2) + 0.0, bool(np.trace(ekf.cov) < 0.1)
+    (array([1., 0., 0.]), True)
+    """
+
+    def __init__(self, landmarks: ArrayLike, sigma_range: float, sigma_bearing: float, alphas: ArrayLike,
+                 motion: str = "velocity", dt: float = 1.0, mean: ArrayLike = (0.0, 0.0, 0.0),
+                 cov: ArrayLike | None = None):
+        cov = np.eye(3) if cov is None else cov
+        super().__init__(landmarks, sigma_range, sigma_bearing, alphas, motion, dt, mean, cov)
+        self.kf = _PoseEKF(dim_x=3, dim_z=2)
+        self.reset(mean, cov)
+
+    def reset(self, mean: ArrayLike, cov: ArrayLike) -> None:
+        """Set the belief to ``N(mean, cov)``.
+
+        Examples
+        --------
+        >>> f = EKFLocalizer([[1, 1]], 0.1, 0.1, [0] * 6)
+        >>> f.reset([1, 2, 3], np.eye(3)); f.mean.tolist()
+        [1.0, 2.0, 3.0]
+        """
+        m, c = self._check_belief(mean, cov)
+        self.kf.x = m.reshape(3, 1)
+        self.kf.P = c.copy()
+
+    @property
+    def mean(self) -> NDArray[np.float64]:
+        """Mean pose, shape (3,)."""
+        return self.kf.x.reshape(3).copy()
+
+    @property
+    def cov(self) -> NDArray[np.float64]:
+        """Pose covariance, shape (3, 3)."""
+        return self.kf.P.copy()
+
+    # -- generic EKF steps (a linear model makes these the Kalman filter) -----
+    def predict_model(self, fx, F: ArrayLike, Q: ArrayLike) -> None:
+        """EKF prediction with a given mean function and Jacobian: ``mu <- fx(mu)``, ``P <- F P F^T + Q``.
+
+        ``fx`` maps a ``(3,)`` pose to a ``(3,)`` pose. With ``fx(x) = F x + B u``
+        this is exactly the Kalman filter's prediction.
+
+        Examples
+        --------
+        >>> f = EKFLocalizer([[1, 1]], 0.1, 0.1, [0] * 6, cov=np.eye(3))
+        >>> f.predict_model(lambda x: x + 1.0, np.eye(3), np.eye(3))
+        >>> f.mean.tolist(), np.diag(f.cov).tolist()
+        ([1.0, 1.0, 1.0], [2.0, 2.0, 2.0])
+        """
+        self.kf.g = lambda x: np.asarray(fx(x.reshape(3)), dtype=float).reshape(3, 1)
+        self.kf.F = np.asarray(F, dtype=float)
+        self.kf.Q = np.asarray(Q, dtype=float)
+        self.kf.predict()
+        self.kf.x[2, 0] = _wrap(self.kf.x[2, 0])
+        self.kf.x_prior = self.kf.x.copy()
+
+    def update_model(self, z: ArrayLike, hx, H: ArrayLike, R: ArrayLike, residual=None) -> None:
+        """EKF update with a given measurement function and Jacobian (filterpy's ``update``).
+
+        ``hx`` maps a ``(3,)`` pose to the predicted measurement; ``H`` is its
+        Jacobian at the current mean; ``residual(z, z_hat)`` defaults to
+        subtraction. The heading is wrapped afterwards.
+
+        Examples
+        --------
+        >>> f = EKFLocalizer([[1, 1]], 0.1, 0.1, [0] * 6, cov=np.eye(3))
+        >>> f.update_model([2.0, 0.0, 0.0], lambda x: x, np.eye(3), np.eye(3))
+        >>> f.mean.tolist(), np.diag(f.cov).tolist()
+        ([1.0, 0.0, 0.0], [0.5, 0.5, 0.5])
+        """
+        zz = np.asarray(z, dtype=float).reshape(-1, 1)
+        Hm = np.asarray(H, dtype=float)
+        res = (lambda a, b: np.asarray(residual(a.reshape(-1), b.reshape(-1))).reshape(-1, 1)) if residual \
+            else np.subtract
+        self.kf.update(zz, HJacobian=lambda x: Hm,
+                       Hx=lambda x: np.asarray(hx(x.reshape(3)), dtype=float).reshape(-1, 1),
+                       R=np.asarray(R, dtype=float), residual=res)
+        self.kf.x[2, 0] = _wrap(self.kf.x[2, 0])
+        self.kf.P = 0.5 * (self.kf.P + self.kf.P.T)
+
+    # -- the localization steps -------------------------------------------------
+    def predict(self, u: ArrayLike) -> None:
+        """Prediction step (PR table 7.2, lines 2-9) for control ``u``.
+
+        Examples
+        --------
+        >>> f = EKFLocalizer([[1, 1]], 0.1, 0.1, [0.1, 0, 0, 0, 0, 0], cov=np.eye(3) * 1e-6)
+        >>> f.predict([1.0, 0.0]); f.mean.tolist(), round(float(f.cov[0, 0]), 4)
+        ([1.0, 0.0, 0.0], 0.1)
+        """
+        g, G, Q = self._process(u)
+        self.predict_model(g, G, Q)
+
+    def update(self, z: ArrayLike, ids: ArrayLike | None = None) -> None:
+        """Correction with range-bearing sightings ``z (K, 2)`` (PR table 7.2, lines 10-19).
+
+        One Kalman update per sighting, each linearised at the current mean.
+        ``ids=None`` means unknown correspondences: each sighting is first
+        associated by maximum likelihood (PR table 7.3). An empty ``z`` is a
+        no-op.
+        """
+        zz, ii = self._sightings(z, ids)
+        if ii is None:
+            ii = self.associate(zz) if len(zz) else np.zeros(0, dtype=int)
+        for zk, j in zip(zz, ii):
+            m = self.landmarks[j]
+            H = _H(self.kf.x[:, 0], m)
+            if H is None:
+                continue  # on top of the landmark: the bearing says nothing
+            self.update_model(zk, lambda x, m=m: _h(x, m), H, self.R1, residual=_residual_z)
+
+
+class UKFLocalizer(_GaussianLocalizer):
+    """UKF landmark localization on filterpy's ``UnscentedKalmanFilter``.
+
+    Same parameters and methods as :class:`EKFLocalizer`; the sigma points
+    are van der Merwe's scaled points (``alpha``, ``beta``, ``kappa``). The
+    heading of the sigma points is averaged as unit vectors, bearings
+    likewise; residuals are wrapped. All sightings of a step are fused in one
+    stacked update. The control noise is mapped into state space with the
+    motion Jacobian (additive process noise), a simplification of PR table 7.4
+    which augments the state with the control and measurement noise.
+
+    Attributes
+    ----------
+    kf : filterpy.kalman.UnscentedKalmanFilter
+
+    Examples
+    --------
+    >>> lms = [[5.0, 0.0], [0.0, 5.0], [-5.0, 0.0]]
+    >>> ukf = UKFLocalizer(lms, 0.1, 0.02, [0.05] * 4 + [0.0, 0.0], dt=1.0,
+    ...                    mean=[0.0, 0.0, 0.0], cov=np.diag([0.5, 0.5, 0.1]))
+    >>> ukf.predict([1.0, 0.0])
+    >>> ukf.update([[4.0, 0.0], [5.099, 1.7682]], ids=[0, 1])
+    >>> ukf.mean.round(1) + 0.0, bool(np.trace(ukf.cov) < 0.1)
+    (array([1., 0., 0.]), True)
+    """
+
+    def __init__(self, landmarks: ArrayLike, sigma_range: float, sigma_bearing: float, alphas: ArrayLike,
+                 motion: str = "velocity", dt: float = 1.0, mean: ArrayLike = (0.0, 0.0, 0.0),
+                 cov: ArrayLike | None = None, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
+        cov = np.eye(3) if cov is None else cov
+        super().__init__(landmarks, sigma_range, sigma_bearing, alphas, motion, dt, mean, cov)
+        points = MerweScaledSigmaPoints(3, alpha=_positive(alpha, "alpha"), beta=float(beta), kappa=float(kappa),
+                                        subtract=_residual_x)
+        self.kf = _VectorUKF(dim_x=3, dim_z=2, dt=self.dt, hx=None, fx=None, points=points,
+                                        x_mean_fn=_state_mean, z_mean_fn=_z_mean,
+                                        residual_x=_residual_x, residual_z=_residual_z)
+        self.reset(mean, cov)
+
+    def reset(self, mean: ArrayLike, cov: ArrayLike) -> None:
+        """Set the belief to ``N(mean, cov)``."""
+        m, c = self._check_belief(mean, cov)
+        self.kf.x = m
+        self.kf.P = c.copy()
+        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+
+    @property
+    def mean(self) -> NDArray[np.float64]:
+        """Mean pose, shape (3,)."""
+        return np.asarray(self.kf.x, dtype=float).reshape(3).copy()
+
+    @property
+    def cov(self) -> NDArray[np.float64]:
+        """Pose covariance, shape (3, 3)."""
+        return np.asarray(self.kf.P, dtype=float).copy()
+
+    def _fix(self) -> None:
+        self.kf.x = np.asarray(self.kf.x, dtype=float).reshape(3)
+        self.kf.x[2] = _wrap(self.kf.x[2])
+        P = 0.5 * (self.kf.P + self.kf.P.T)
+        w, v = np.linalg.eigh(P)
+        if w.min() <= 1e-12:   # keep P positive definite for the next Cholesky
+            P = (v * np.maximum(w, 1e-12)) @ v.T
+        self.kf.P = P
+
+    def predict(self, u: ArrayLike) -> None:
+        """Unscented prediction through the motion model's mean function."""
+        g, _, Q = self._process(u)
+        self.kf.Q = Q
+        self.kf.predict(fx=lambda x, dt: g(x))
+        self._fix()
+        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+
+    def update(self, z: ArrayLike, ids: ArrayLike | None = None) -> None:
+        """Unscented correction with all sightings of this step stacked in one vector.
+
+        ``ids=None`` associates by maximum likelihood on the linearised model
+        (as the EKF does). An empty ``z`` is a no-op.
+        """
+        zz, ii = self._sightings(z, ids)
+        if len(zz) == 0:
+            return
+        if ii is None:
+            ii = self.associate(zz)
+        lms = self.landmarks[ii]
+
+        def hx_flat(x):
+            d = lms - np.asarray(x)[:2]
+            b = _wrap(np.arctan2(d[:, 1], d[:, 0]) - x[2])
+            return np.stack([np.hypot(d[:, 0], d[:, 1]), b], axis=-1).reshape(-1)
+
+        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        R = np.kron(np.eye(len(zz)), self.R1)
+        self.kf.update(zz.reshape(-1), R=R, hx=hx_flat)
+        self._fix()
+        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)

@@ -1,0 +1,212 @@
+"""Figures of the EKF-versus-MCL chapter: Gaussian ellipses next to particle clouds.
+
+Every function draws onto a given ``ax`` (or a new one) and returns what it
+made. The data come from :mod:`localize.compare` (a :class:`~localize.compare.Run`
+for one seed, a :class:`~localize.compare.MonteCarlo` for many).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from . import draw_poses, new_axes
+
+__all__ = [
+    "FILTER_COLORS",
+    "covariance_ellipse",
+    "draw_gaussian_belief",
+    "draw_landmarks",
+    "plot_beliefs",
+    "plot_errors",
+    "plot_nees",
+]
+
+#: One colour per filter, used by every figure of the chapter.
+FILTER_COLORS = {"EKF": "tab:blue", "UKF": "tab:green", "MCL": "tab:red", "truth": "black"}
+
+
+def covariance_ellipse(mean: ArrayLike, cov: ArrayLike, ax=None, n_std: float = 2.0, **kwargs):
+    """Draw the ``n_std``-sigma ellipse of the x-y marginal of a pose Gaussian.
+
+    ``n_std=2`` encloses about 86% of a 2-D Gaussian's mass
+    (``1 - exp(-n_std**2 / 2)``). Returns the ``Ellipse`` patch.
+
+    Examples
+    --------
+    >>> e = covariance_ellipse([1.0, 2.0, 0.0], np.diag([4.0, 1.0, 0.1]))
+    >>> round(float(e.width), 6), round(float(e.height), 6)
+    (8.0, 4.0)
+    """
+    from matplotlib.patches import Ellipse
+
+    _, ax = new_axes(ax)
+    m = np.asarray(mean, dtype=float).reshape(-1)
+    c = np.asarray(cov, dtype=float)[:2, :2]
+    if not (np.isfinite(n_std) and n_std > 0):
+        raise ValueError(f"n_std must be a positive number of standard deviations; got {n_std!r}")
+    vals, vecs = np.linalg.eigh(0.5 * (c + c.T))
+    vals = np.maximum(vals, 0.0)
+    angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
+    kwargs.setdefault("fill", False)
+    kwargs.setdefault("lw", 1.8)
+    e = Ellipse((m[0], m[1]), 2 * n_std * np.sqrt(vals[1]), 2 * n_std * np.sqrt(vals[0]), angle=angle, **kwargs)
+    ax.add_patch(e)
+    return e
+
+
+def draw_gaussian_belief(mean: ArrayLike, cov: ArrayLike, ax=None, color="tab:blue", n_std: float = 2.0,
+                         length: float = 1.0, label: str | None = None):
+    """A Gaussian pose belief: the x-y ellipse and a wedge of ``±n_std`` heading sigmas.
+
+    Returns ``(ellipse, wedge_lines)``.
+
+    Examples
+    --------
+    >>> e, lines = draw_gaussian_belief([0, 0, 0], np.diag([1.0, 1.0, 0.04]))
+    >>> len(lines)
+    3
+    """
+    _, ax = new_axes(ax)
+    m = np.asarray(mean, dtype=float).reshape(3)
+    e = covariance_ellipse(m, cov, ax=ax, n_std=n_std, color=color, label=label)
+    s = float(np.sqrt(max(np.asarray(cov, dtype=float)[2, 2], 0.0)))
+    lines = []
+    for d, ls in ((0.0, "-"), (-n_std * s, ":"), (n_std * s, ":")):
+        a = m[2] + d
+        (ln,) = ax.plot([m[0], m[0] + length * np.cos(a)], [m[1], m[1] + length * np.sin(a)], color=color,
+                        ls=ls, lw=1.5)
+        lines.append(ln)
+    return e, lines
+
+
+def draw_landmarks(landmarks: ArrayLike, ax=None, labels: bool = True, **kwargs):
+    """Landmarks as black stars, numbered. Returns the scatter artist."""
+    _, ax = new_axes(ax)
+    lm = np.asarray(landmarks, dtype=float).reshape(-1, 2)
+    kwargs.setdefault("marker", "*")
+    kwargs.setdefault("s", 140)
+    kwargs.setdefault("color", "k")
+    sc = ax.scatter(lm[:, 0], lm[:, 1], zorder=4, **kwargs)
+    if labels:
+        for j, (x, y) in enumerate(lm):
+            ax.annotate(str(j), (x, y), textcoords="offset points", xytext=(5, 5), fontsize=8)
+    return sc
+
+
+def plot_beliefs(run, steps, axes=None, pad: float = 2.0, n_std: float = 2.0, max_particles: int = 400):
+    """The chapter's key figure: beliefs of all filters on the same steps.
+
+    Top row: the EKF's and the UKF's 2-sigma ellipses (with heading wedges);
+    bottom row: MCL's particle cloud. One column per step, same limits in a
+    column; the true pose is the black robot.
+
+    Parameters
+    ----------
+    run : localize.compare.Run
+        A run recorded with ``snapshot_steps`` containing ``steps``.
+    steps : sequence of int
+    axes : array of Axes, shape (2, len(steps)), optional
+    pad : float
+        Margin around the landmarks, metres.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    from . import draw_robot
+
+    steps = list(steps)
+    if not steps:
+        raise ValueError("steps must name at least one recorded step")
+    missing = [s for s in steps if s not in run.snapshots]
+    if missing:
+        raise ValueError(f"steps {missing} were not recorded; run with snapshot_steps including them "
+                         f"(recorded: {sorted(run.snapshots)})")
+    if axes is None:
+        fig, axes = plt.subplots(2, len(steps), figsize=(3.2 * len(steps), 6.4), squeeze=False)
+    else:
+        axes = np.asarray(axes).reshape(2, len(steps))
+        fig = axes[0, 0].figure
+    lm = run.scenario.landmarks
+    lo, hi = lm.min(axis=0) - pad, lm.max(axis=0) + pad
+    for c, t in enumerate(steps):
+        snap = run.snapshots[t]
+        truth = run.truth[t]
+        for r in range(2):
+            ax = axes[r, c]
+            draw_landmarks(lm, ax=ax, labels=False, s=80)
+            draw_robot(truth, ax=ax, radius=0.35, color="k")
+            ax.set_xlim(lo[0], hi[0])
+            ax.set_ylim(lo[1], hi[1])
+            ax.set_aspect("equal")
+            ax.tick_params(labelsize=7)
+        for name in ("EKF", "UKF"):
+            if name in snap:
+                m, P = snap[name]
+                draw_gaussian_belief(m, P, ax=axes[0, c], color=FILTER_COLORS[name], n_std=n_std, label=name)
+        if "MCL" in snap:
+            parts = snap["MCL"]
+            if len(parts) > max_particles:
+                parts = parts[np.linspace(0, len(parts) - 1, max_particles).astype(int)]
+            axes[1, c].set_xlim(lo[0], hi[0])
+            draw_poses(parts, ax=axes[1, c], color=FILTER_COLORS["MCL"], alpha=0.5, length=0.4)
+        axes[0, c].set_title(f"step {t}", fontsize=9)
+    axes[0, 0].set_ylabel("EKF / UKF (2σ)")
+    axes[1, 0].set_ylabel("MCL particles")
+    axes[0, 0].legend(loc="lower left", fontsize=7)
+    fig.suptitle(run.scenario.title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_errors(mc, ax=None, what: str = "position", band: tuple[float, float] = (10, 90)):
+    """Error over time across seeds: median line and a percentile band per filter.
+
+    ``what`` is ``"position"`` (metres) or ``"heading"`` (degrees).
+    Returns the axes.
+    """
+    _, ax = new_axes(ax, figsize=(6, 3.2))
+    if what not in ("position", "heading"):
+        raise ValueError(f"what must be 'position' or 'heading'; got {what!r}")
+    t = np.arange(mc.n_steps)
+    for name, m in mc.metrics.items():
+        e = m.pos_err if what == "position" else np.degrees(m.head_err)
+        lo, hi = np.percentile(e, band, axis=0)
+        col = FILTER_COLORS.get(name, None)
+        ax.fill_between(t, lo, hi, color=col, alpha=0.15, lw=0)
+        ax.plot(t, np.median(e, axis=0), color=col, label=name)
+    if what == "position":
+        ax.axhline(mc.fail_threshold, color="gray", ls="--", lw=1, label="failure threshold")
+        ax.set_ylabel("position error [m]")
+    else:
+        ax.set_ylabel("heading error [deg]")
+    ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_title(f"{mc.scenario.title}: median and {band[0]}-{band[1]}% band, {mc.n_seeds} seeds", fontsize=9)
+    ax.legend(fontsize=7)
+    return ax
+
+
+def plot_nees(mc, ax=None):
+    """Average NEES over seeds, per step and filter, with the 95% chi-square band.
+
+    Inside the band the filter's covariance matches its actual errors; above
+    it the filter is overconfident, below it too cautious (Bar-Shalom, Li and
+    Kirubarajan 2001, section 5.4). Returns the axes.
+    """
+    _, ax = new_axes(ax, figsize=(6, 3.2))
+    t = np.arange(mc.n_steps)
+    lo, hi = mc.nees_bounds
+    ax.axhspan(lo, hi, color="gray", alpha=0.2, label="95% band (consistent)")
+    ax.axhline(3.0, color="gray", lw=0.8)
+    for name, m in mc.metrics.items():
+        ax.plot(t, np.maximum(m.nees.mean(axis=0), 1e-2), color=FILTER_COLORS.get(name), label=name)
+    ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_ylabel("average NEES")
+    ax.set_title(f"{mc.scenario.title}: NEES, {mc.n_seeds} seeds", fontsize=9)
+    ax.legend(fontsize=7)
+    return ax
