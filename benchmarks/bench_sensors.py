@@ -1,0 +1,63 @@
+"""Measurement-model speed on the 800 x 800 benchmark map (issue 5 targets).
+
+    python benchmarks/bench_sensors.py
+
+10,000 poses x 60 beams. Prints a Markdown table of the best of a few
+repeats, wall-clock and CPU time (the CPU column is the fairer one on a
+shared machine). Targets: likelihood field >= 100 M beams/s; beam-model scan
+log-likelihood of 10,000 x 60 beams in under 15 ms given the expected ranges.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from localize.maps import benchmark_map
+from localize.raycast import RayCaster
+from localize.sensors import BeamModel, LikelihoodField
+
+N_POSES, N_BEAMS, MAX_RANGE = 10_000, 60, 10.0
+
+
+def best(fn, repeats: int = 10) -> tuple[float, float]:
+    fn()
+    walls, cpus = [], []
+    for _ in range(repeats):
+        w, c = time.perf_counter(), time.process_time()
+        fn()
+        walls.append(time.perf_counter() - w)
+        cpus.append(time.process_time() - c)
+    return min(walls), min(cpus)
+
+
+def main() -> None:
+    grid = benchmark_map(800)
+    rng = np.random.default_rng(0)
+    poses = grid.sample_free(N_POSES, rng)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, N_BEAMS)
+    beams = N_POSES * N_BEAMS
+    caster = RayCaster(grid, MAX_RANGE, "march")
+    bm = BeamModel(grid, MAX_RANGE, caster=caster)
+    scan = bm.sample(poses[:1], angles, rng)[0]
+    expected32 = caster.cast(poses, angles, dtype=np.float32)
+    expected64 = expected32.astype(float)
+    rows = []
+    w, c = best(lambda: bm.log_likelihood_expected(scan, expected32))
+    rows.append(("beam model, given expected ranges (float32)", w, c))
+    w, c = best(lambda: bm.log_likelihood_expected(scan, expected64))
+    rows.append(("beam model, given expected ranges (float64)", w, c))
+    lf = LikelihoodField(grid, MAX_RANGE, 0.9, 0.1, sigma_hit=0.2)
+    z = np.minimum(scan, MAX_RANGE - 1e-3)  # every beam returns: the worst case for the field
+    w, c = best(lambda: lf.log_likelihood(poses, z, angles))
+    rows.append(("likelihood field, whole scan", w, c))
+    print(f"Measurement models on benchmark_map(800), {N_POSES} poses x {N_BEAMS} beams\n")
+    print("| task | wall [ms] | CPU [ms] | M beams/s (CPU) |")
+    print("|---|---:|---:|---:|")
+    for name, wall, cpu in rows:
+        print(f"| {name} | {wall * 1e3:.2f} | {cpu * 1e3:.2f} | {beams / cpu / 1e6:.0f} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,8 @@
+"""``python -m localize ...``: the command line of :mod:`localize.cli`."""
+
+import sys
+
+from .cli import main
+
+if __name__ == "__main__":
+    sys.exit(main())

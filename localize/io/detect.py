@@ -1,0 +1,129 @@
+"""Recognise file formats from their content, and read any supported map or log."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..grid import OccupancyGrid
+from ._common import FormatError, LaserLog, open_text
+from .carmen import _KEYWORD, read_carmen_log
+from .cmu import read_cmu_log, read_cmu_map
+from .ros import read_ros_map
+
+__all__ = ["MAP_FORMATS", "LOG_FORMATS", "detect_map_format", "detect_log_format", "read_map", "read_log"]
+
+PathLike = str | os.PathLike
+
+MAP_FORMATS = ("cmu", "ros")
+LOG_FORMATS = ("cmu", "carmen")
+
+
+def _head(path: PathLike, n_lines: int = 200) -> list[tuple[int, str]]:
+    """The first non-blank lines of a (possibly gzipped) text file with their numbers."""
+    out = []
+    with open_text(path) as f:
+        try:
+            for k, line in enumerate(f, start=1):
+                if line.strip():
+                    out.append((k, line.strip()))
+                if len(out) >= n_lines:
+                    break
+        except (EOFError, OSError):
+            pass
+    return out
+
+
+def detect_map_format(path: PathLike) -> str:
+    """Name the format of a map file from its content: ``"cmu"`` or ``"ros"``.
+
+    A ROS map is recognised by its YAML keys (``image:``, ``resolution:``); a
+    CMU/BeeSoft map by its ``robot_specifications->`` header or
+    ``global_map[0]:`` line. An image file (PGM/PNG) is rejected with a hint to
+    pass its YAML instead.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "map.txt"
+    >>> _ = p.write_text("image: a.pgm\\nresolution: 0.05\\norigin: [0, 0, 0]\\n")
+    >>> detect_map_format(p)
+    'ros'
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FormatError(p, None, "no such file")
+    with open(p, "rb") as f:
+        magic = f.read(8)
+    if not magic:
+        raise FormatError(p, None, "the file is empty; expected a map (CMU .dat or ROS map_server .yaml)")
+    if magic[:2] in (b"P5", b"P2") or magic.startswith(b"\x89PNG"):
+        cand = p.with_suffix(".yaml")
+        hint = f" (there is one: {cand})" if cand.exists() else ""
+        raise FormatError(p, None, "this is a map image; pass the map_server YAML that describes it" + hint)
+    head = _head(p, 50)
+    keys = set()
+    for _, line in head:
+        if line.startswith("robot_specifications->") or line.startswith("global_map[0]"):
+            return "cmu"
+        if ":" in line and not line.startswith("#"):
+            keys.add(line.split(":", 1)[0].strip())
+    if {"image", "resolution"} <= keys:
+        return "ros"
+    first = head[0] if head else (1, "")
+    raise FormatError(p, first[0], "cannot tell the map format: expected a CMU 16-831 map "
+                                   "('robot_specifications->...' header, 'global_map[0]: ...') or a ROS map_server "
+                                   f"YAML ('image:', 'resolution:', 'origin:'); the file starts with {first[1][:60]!r}")
+
+
+def detect_log_format(path: PathLike) -> str:
+    """Name the format of a log from its content: ``"cmu"`` (``O``/``L`` records) or ``"carmen"``.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "robot.log"
+    >>> _ = p.write_text("# a comment\\nPARAM robot_use_laser on\\nODOM 0 0 0 0 0 0 0 h 0\\n")
+    >>> detect_log_format(p)
+    'carmen'
+    """
+    head = _head(path, 200)
+    for n, line in head:
+        tok = line.split()[0]
+        if tok.startswith("#"):
+            continue
+        if tok in ("O", "L"):
+            return "cmu"
+        if _KEYWORD.match(tok) and len(tok) > 1:
+            return "carmen"
+        raise FormatError(path, n, "cannot tell the log format: expected CMU 16-831 records ('O ...', 'L ...') or "
+                                   f"CARMEN records (FLASER, ODOM, PARAM ...); got {line[:60]!r}")
+    raise FormatError(path, None, "the file holds no records (only blank or comment lines)")
+
+
+def read_map(path: PathLike, format: str | None = None, **kwargs) -> OccupancyGrid:
+    """Read a map of any supported format (detected from the content unless ``format`` is given).
+
+    Keyword arguments go to :func:`~localize.io.read_ros_map` or
+    :func:`~localize.io.read_cmu_map`.
+    """
+    fmt = format or detect_map_format(path)
+    if fmt == "cmu":
+        return read_cmu_map(path, **kwargs)
+    if fmt == "ros":
+        return read_ros_map(path, **kwargs)
+    raise ValueError(f"format must be one of {MAP_FORMATS} or None (detect); got {format!r}")
+
+
+def read_log(path: PathLike, format: str | None = None, **kwargs) -> LaserLog:
+    """Read a log of any supported format (detected from the content unless ``format`` is given).
+
+    Keyword arguments go to :func:`~localize.io.read_cmu_log` or
+    :func:`~localize.io.read_carmen_log`.
+    """
+    fmt = format or detect_log_format(path)
+    if fmt == "cmu":
+        return read_cmu_log(path, **kwargs)
+    if fmt == "carmen":
+        return read_carmen_log(path, **kwargs)
+    raise ValueError(f"format must be one of {LOG_FORMATS} or None (detect); got {format!r}")

@@ -1,0 +1,870 @@
+"""Measurement models: how likely is a range scan (or a landmark sighting) from a pose?
+
+Three models, each exposing the interface the filters use:
+
+:class:`BeamModel`
+    The beam model of *Probabilistic Robotics* (Thrun, Burgard and Fox 2005,
+    "PR", section 6.3, table 6.1): each beam's reading is a mixture of a
+    correct hit with Gaussian noise, an unexpected short reading, a
+    max-range failure and a uniform random reading. Needs ray casting.
+:class:`LikelihoodField`
+    The likelihood-field ("end point") model of PR section 6.4, table 6.3,
+    the default of ROS AMCL: a beam's end point is scored by its distance
+    to the nearest obstacle. Needs only table lookups.
+:class:`LandmarkModel`
+    Range and bearing to known, identified landmarks (PR section 6.6), with
+    the analytic Jacobian the EKF needs.
+
+Common interface of the range models (agreed with the filters):
+
+* ``log_likelihood(poses (N, 3), ranges (B,), angles (B,)) -> (N,)``: the
+  log-likelihood of one scan for each *robot* pose; the model applies its
+  ``sensor_offset = (dx, dy, dtheta)`` (the sensor's pose in the robot frame)
+  itself. Beams are assumed independent given the pose, so the scan's
+  log-likelihood is the *sum* of the beams' log-densities (a product of
+  densities); ``max_beams`` keeps an evenly spaced subset and ``temper``
+  (``0 < temper <= 1``) scales the sum, both ways to soften the
+  overconfidence that the independence assumption brings.
+* ``sample(poses (N, 3), angles (B,), rng) -> (N, B)``: simulated scans.
+* Readings ``>= max_range`` (and ``+inf``) mean "no return" and are clipped
+  to ``max_range``. Negative or NaN readings raise ``ValueError``.
+
+Log-likelihoods are natural logarithms of (pseudo-)densities in 1/metre
+units; only differences between poses matter to a filter.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import ndtr, ndtri
+
+from .geometry import as_poses, wrap_angle
+from .grid import OccupancyGrid
+from .raycast import RayCaster, _check_angles, _check_grid, _check_max_range
+
+__all__ = ["BeamModel", "LikelihoodField", "LandmarkModel", "check_ranges", "sensor_poses", "select_beams"]
+
+_SQRT2PI = math.sqrt(2.0 * math.pi)
+
+
+# ------------------------------------------------------------------ helpers
+def _positive(name: str, value: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a number; got {value!r}") from None
+    if not np.isfinite(v) or v <= 0:
+        raise ValueError(f"{name} must be positive and finite; got {value!r}")
+    return v
+
+
+def _weights(names: tuple[str, ...], values: tuple[float, ...], tol: float = 1e-6) -> NDArray[np.float64]:
+    w = np.array([float(v) for v in values])
+    for n, v in zip(names, w):
+        if not np.isfinite(v) or v < 0 or v > 1:
+            raise ValueError(f"{n} must be a mixture weight in [0, 1]; got {v!r}")
+    if abs(w.sum() - 1.0) > tol:
+        listing = " + ".join(f"{n}={v:g}" for n, v in zip(names, w))
+        raise ValueError(
+            f"the mixture weights must sum to 1; got {listing} = {w.sum():.6g}. "
+            f"Divide each by their sum to normalise them."
+        )
+    return w
+
+
+def _offset(sensor_offset: ArrayLike) -> NDArray[np.float64]:
+    o = np.asarray(sensor_offset, dtype=float)
+    if o.shape != (3,) or not np.all(np.isfinite(o)):
+        raise ValueError(f"sensor_offset must be a finite (dx, dy, dtheta) in the robot frame; got {sensor_offset!r}")
+    return o
+
+
+def sensor_poses(poses: ArrayLike, sensor_offset: ArrayLike = (0.0, 0.0, 0.0)) -> NDArray[np.float64]:
+    """Sensor poses ``(N, 3)`` of robots at ``poses``, for a sensor mounted at ``sensor_offset``.
+
+    ``sensor_offset = (dx, dy, dtheta)`` is the sensor's pose in the robot's
+    frame (the CMU 16-831 robot's laser sits 25 cm ahead of its centre).
+    NaN poses raise ``ValueError``.
+
+    Examples
+    --------
+    >>> sensor_poses([[1.0, 2.0, np.pi / 2]], (0.25, 0.0, 0.0)).round(6)
+    array([[1.      , 2.25    , 1.570796]])
+    """
+    p = as_poses(poses, "poses")
+    if p.ndim == 1:
+        p = p[None, :]
+    if p.ndim != 2:
+        raise ValueError(f"poses must be an (N, 3) array of robot poses; got shape {p.shape}")
+    o = _offset(sensor_offset)
+    if not o.any():
+        return p
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    return np.stack([p[:, 0] + c * o[0] - s * o[1], p[:, 1] + s * o[0] + c * o[1], p[:, 2] + o[2]], axis=-1)
+
+
+def check_ranges(ranges: ArrayLike, max_range: float, name: str = "ranges") -> NDArray[np.float64]:
+    """Validate range readings and clip "no return" readings to ``max_range``.
+
+    Readings must be >= 0 and not NaN; readings above ``max_range``
+    (including ``+inf``) become ``max_range``. An empty scan raises.
+
+    Examples
+    --------
+    >>> check_ranges([1.0, 12.0, np.inf], 10.0)
+    array([ 1., 10., 10.])
+    >>> check_ranges([-0.5], 10.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: ranges must be >= 0 metres; ranges[0] = -0.5
+    """
+    z = np.asarray(ranges, dtype=float)
+    if z.ndim == 0:
+        z = z.reshape(1)
+    if z.size == 0:
+        raise ValueError(f"{name} is empty: a scan needs at least one beam")
+    if np.isnan(z).any():
+        k = np.argwhere(np.isnan(z))[0]
+        raise ValueError(f"{name} contains NaN (first at index {tuple(int(i) for i in k)}); "
+                         "mark missing readings as max_range or drop them")
+    if (z < 0).any():
+        k = np.argwhere(z < 0)[0]
+        where = int(k[0]) if z.ndim == 1 else tuple(int(i) for i in k)
+        raise ValueError(f"{name} must be >= 0 metres; {name}[{where}] = {float(z[tuple(k)])!r}")
+    return np.minimum(z, max_range)
+
+
+def select_beams(n_beams: int, max_beams: int | None) -> NDArray[np.intp]:
+    """Indices of at most ``max_beams`` evenly spaced beams out of ``n_beams``.
+
+    The first and last beams are always kept (ROS AMCL's ``max_beams``).
+
+    Examples
+    --------
+    >>> select_beams(181, 5)
+    array([  0,  45,  90, 135, 180])
+    >>> select_beams(3, None)
+    array([0, 1, 2])
+    """
+    n = int(n_beams)
+    if max_beams is None or max_beams >= n:
+        return np.arange(n)
+    m = int(max_beams)
+    if m < 1:
+        raise ValueError(f"max_beams must be >= 1 or None; got {max_beams}")
+    if m == 1:
+        return np.array([0])
+    return np.round(np.linspace(0, n - 1, m)).astype(np.intp)
+
+
+def _check_rng(rng) -> np.random.Generator:
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    return rng
+
+
+def _check_temper(temper: float) -> float:
+    t = float(temper)
+    if not 0.0 < t <= 1.0:
+        raise ValueError(f"temper must lie in (0, 1] (1 = plain product of beams); got {temper!r}")
+    return t
+
+
+# ---------------------------------------------------------------- beam model
+class BeamModel:
+    """The beam range-finder model: a four-part mixture per beam (PR table 6.1).
+
+    For a beam whose ray-cast ("expected") range is ``z*`` the reading ``z``
+    in ``[0, max_range]`` has the pseudo-density
+
+    ``p(z | z*) = z_hit p_hit + z_short p_short + z_max p_max + z_rand p_rand``
+
+    * ``p_hit``: a normal density ``N(z; z*, sigma_hit^2)`` truncated to
+      ``[0, max_range]`` and divided by its mass there, ``eta``;
+    * ``p_short``: an exponential density ``lambda e^{-lambda z}`` truncated
+      to ``[0, z*]`` and divided by its mass ``1 - e^{-lambda z*}``
+      (unexpected objects in front of the map's obstacle);
+    * ``p_max``: a point mass at ``max_range`` (no return);
+    * ``p_rand``: uniform ``1 / max_range`` on ``[0, max_range)``.
+
+    The three continuous parts integrate to one over ``[0, max_range]`` and
+    the max-range part carries probability ``z_max``, so the whole reading
+    distribution has mass one. At ``z = max_range`` :meth:`pdf` adds the
+    *mass* ``z_max`` to the densities there, exactly as PR's algorithm
+    does; this is a "pseudo-density", consistent across poses.
+
+    ``lambda_short`` is a *rate* (1/metre), as in PR; a seed report writes
+    the exponential with a scale ``1/lambda`` instead. An expected range
+    below ``z_floor = 1e-3 * max_range`` (a sensor inside or touching an
+    obstacle) is raised to ``z_floor`` so that the short part stays a proper
+    density.
+
+    Parameters
+    ----------
+    grid : OccupancyGrid or None
+        The map. ``None`` builds a model that can only work with expected
+        ranges given to it (:meth:`pdf`, :meth:`log_likelihood_expected`).
+    max_range : float
+        The sensor's maximum range (metres).
+    z_hit, z_short, z_max, z_rand : float
+        Mixture weights in ``[0, 1]`` summing to 1 (within 1e-6).
+    sigma_hit : float
+        Standard deviation of a correct hit (metres), > 0.
+    lambda_short : float
+        Rate of short readings (1/metre), > 0.
+    sensor_offset : (dx, dy, dtheta)
+        Sensor pose in the robot frame.
+    max_beams : int or None
+        Use only this many evenly spaced beams of each scan (None: all).
+    temper : float
+        Multiply the scan log-likelihood by this factor in ``(0, 1]``.
+    method, n_bins : str, int
+        Ray casting method and lookup-table bins (see
+        :class:`localize.raycast.RayCaster`).
+    caster : RayCaster, optional
+        Share a caster (and its table) between models.
+
+    Examples
+    --------
+    >>> m = BeamModel(None, 10.0, 0.8, 0.1, 0.05, 0.05, sigma_hit=0.2, lambda_short=0.5)
+    >>> m.pdf([2.0, 3.0, 10.0], 3.0).round(4)
+    array([0.0287, 1.6151, 0.05  ])
+    """
+
+    def __init__(self, grid: OccupancyGrid | None, max_range: float, z_hit: float = 0.8, z_short: float = 0.1,
+                 z_max: float = 0.05, z_rand: float = 0.05, sigma_hit: float = 0.2, lambda_short: float = 0.5,
+                 *, sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
+                 temper: float = 1.0, method: str = "lut", n_bins: int = 360,
+                 caster: RayCaster | None = None) -> None:
+        self.grid = None if grid is None else _check_grid(grid)
+        self.max_range = _check_max_range(max_range)
+        w = _weights(("z_hit", "z_short", "z_max", "z_rand"), (z_hit, z_short, z_max, z_rand))
+        self.z_hit, self.z_short, self.z_max, self.z_rand = (float(v) for v in w)
+        self.sigma_hit = _positive("sigma_hit", sigma_hit)
+        self.lambda_short = _positive("lambda_short", lambda_short)
+        self.sensor_offset = _offset(sensor_offset)
+        if max_beams is not None and int(max_beams) < 1:
+            raise ValueError(f"max_beams must be >= 1 or None; got {max_beams}")
+        self.max_beams = None if max_beams is None else int(max_beams)
+        self.temper = _check_temper(temper)
+        self.z_floor = 1e-3 * self.max_range
+        if caster is not None:
+            if not isinstance(caster, RayCaster):
+                raise TypeError(f"caster must be a localize.raycast.RayCaster; got {type(caster).__name__}")
+            if caster.max_range != self.max_range:
+                raise ValueError(f"caster.max_range ({caster.max_range}) differs from max_range ({self.max_range})")
+            self.caster = caster
+        elif self.grid is not None:
+            self.caster = RayCaster(self.grid, self.max_range, method=method, n_bins=n_bins)
+        else:
+            self.caster = None
+
+    @property
+    def params(self) -> dict[str, float]:
+        """The six intrinsic parameters as a dict (PR's Theta)."""
+        return {"z_hit": self.z_hit, "z_short": self.z_short, "z_max": self.z_max, "z_rand": self.z_rand,
+                "sigma_hit": self.sigma_hit, "lambda_short": self.lambda_short}
+
+    def __repr__(self) -> str:
+        p = ", ".join(f"{k}={v:g}" for k, v in self.params.items())
+        return f"BeamModel(max_range={self.max_range:g}, {p})"
+
+    # ---------------------------------------------------------- components
+    def components(self, z: ArrayLike, z_expected: ArrayLike) -> dict[str, NDArray[np.float64]]:
+        """The four unweighted components ``p_hit, p_short, p_max, p_rand`` at ``z``.
+
+        ``z`` is clipped to ``[0, max_range]``; ``p_max`` is 1 where
+        ``z == max_range`` (a mass, not a density). Readable reference for
+        :meth:`pdf`.
+
+        Examples
+        --------
+        >>> m = BeamModel(None, 10.0)
+        >>> {k: round(float(v), 4) for k, v in m.components(1.0, 3.0).items()}
+        {'p_hit': 0.0, 'p_short': 0.3904, 'p_max': 0.0, 'p_rand': 0.1}
+        """
+        z = np.clip(np.asarray(z, dtype=float), 0.0, self.max_range)
+        zs = np.clip(np.asarray(z_expected, dtype=float), self.z_floor, self.max_range)
+        z, zs = np.broadcast_arrays(z, zs)
+        sig, lam, zmax = self.sigma_hit, self.lambda_short, self.max_range
+        eta = ndtr((zmax - zs) / sig) - ndtr(-zs / sig)
+        p_hit = np.exp(-0.5 * ((z - zs) / sig) ** 2) / (sig * _SQRT2PI) / eta
+        p_short = np.where(z <= zs, lam * np.exp(-lam * z) / -np.expm1(-lam * zs), 0.0)
+        p_max = (z >= zmax).astype(float)
+        p_rand = np.where(z < zmax, 1.0 / zmax, 0.0)
+        return {"p_hit": p_hit, "p_short": p_short, "p_max": p_max, "p_rand": p_rand}
+
+    def pdf(self, z: ArrayLike, z_expected: ArrayLike) -> NDArray[np.float64]:
+        """Pseudo-density of readings ``z`` given expected ranges ``z_expected`` (broadcast).
+
+        Readings above ``max_range`` count as ``max_range`` (no return).
+
+        Examples
+        --------
+        >>> m = BeamModel(None, 5.0, 0.7, 0.2, 0.05, 0.05, sigma_hit=0.1, lambda_short=1.0)
+        >>> m.pdf([0.5, 2.0, 5.0, 7.0], 2.0).round(4)
+        array([0.1503, 2.8339, 0.05  , 0.05  ])
+        """
+        z = np.asarray(z, dtype=float)
+        if np.isnan(z).any() or (z < 0).any():
+            raise ValueError("z must hold readings >= 0 (not NaN); readings >= max_range mean no return")
+        c = self.components(z, z_expected)
+        p = self.z_hit * c["p_hit"] + self.z_short * c["p_short"] + self.z_max * c["p_max"]
+        return p + self.z_rand * c["p_rand"]
+
+    def beam_log_pdf(self, z: ArrayLike, z_expected: ArrayLike) -> NDArray:
+        """Per-beam ``log pdf`` for already validated readings, vectorised and fast.
+
+        ``z`` (B,) or (N, B) and ``z_expected`` (N, B), both already clipped
+        to ``[0, max_range]``. Works in float32 when ``z_expected`` is
+        float32. The normalisers that only matter near ``0`` and
+        ``max_range`` are evaluated only where they differ from 1.
+
+        Examples
+        --------
+        >>> m = BeamModel(None, 5.0, 0.7, 0.2, 0.05, 0.05, sigma_hit=0.1, lambda_short=1.0)
+        >>> z = np.array([0.5, 2.0, 5.0])
+        >>> bool(np.allclose(m.beam_log_pdf(z, np.full((1, 3), 2.0)), np.log(m.pdf(z, 2.0))))
+        True
+        """
+        zs = np.asarray(z_expected)
+        dt = np.float32 if zs.dtype == np.float32 else np.float64
+        zs = np.maximum(zs.astype(dt, copy=False), dt(self.z_floor))
+        z = np.asarray(z, dtype=dt)
+        sig, lam, zmax = self.sigma_hit, self.lambda_short, self.max_range
+        # hit: Gaussian; its truncation mass eta differs from 1 only within 8 sigma of 0 or max_range
+        d = z - zs
+        d *= dt(1.0 / sig)
+        d *= d
+        d *= dt(-0.5)
+        g = np.exp(d)
+        g *= dt(self.z_hit / (sig * _SQRT2PI))
+        edge = (zs < 8 * sig) | (zs > zmax - 8 * sig)
+        if edge.any():
+            ze = zs[edge].astype(float)
+            eta = ndtr((zmax - ze) / sig) - ndtr(-ze / sig)
+            g[edge] /= eta.astype(dt)
+        # short: lambda e^{-lambda z} / (1 - e^{-lambda z*}) on z <= z*; the numerator
+        # depends on the reading only, so it is computed per beam and broadcast
+        zb = np.broadcast_to(z, zs.shape)
+        num = np.exp(dt(-lam) * z) * dt(self.z_short * lam)
+        short = np.multiply(dt(-lam), zs)
+        np.expm1(short, out=short)
+        np.divide(num, short, out=short)
+        short *= (zb <= zs)
+        short *= dt(-1.0)
+        g += short
+        # max-range mass and uniform density, per beam
+        extra = np.where(z >= zmax, dt(self.z_max), dt(self.z_rand / zmax))
+        if self.z_max > 0 and self.z_rand > 0:  # the mixture never vanishes: plain log
+            g += extra
+            return np.log(g)
+        # Without the floor (e.g. the plain Gaussian model z_hit = 1) a far-off reading
+        # underflows the Gaussian to 0: add in log space instead, log(0) = -inf allowed.
+        with np.errstate(divide="ignore"):
+            rest = np.log(short + extra)
+            d += dt(np.log(self.z_hit / (sig * _SQRT2PI))) if self.z_hit > 0 else dt(-np.inf)
+            if edge.any():
+                d[edge] -= np.log(eta).astype(dt)
+        return np.logaddexp(d, rest)
+
+    # ---------------------------------------------------------------- scans
+    def _prepare(self, ranges: ArrayLike, angles: ArrayLike):
+        a = _check_angles(angles)
+        z = check_ranges(ranges, self.max_range)
+        if z.ndim != 1 or z.shape != a.shape:
+            raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
+        sel = select_beams(a.size, self.max_beams)
+        return z[sel], a[sel]
+
+    def expected(self, poses: ArrayLike, angles: ArrayLike, dtype: type = np.float64) -> NDArray:
+        """Ray-cast expected ranges ``(N, B)`` for robot ``poses`` (the sensor offset applied).
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> m = BeamModel(office(), 8.0, method="march", sensor_offset=(0.25, 0.0, 0.0))
+        >>> m.expected([[6.0, 5.5, np.pi / 2]], [0.0]).round(3)   # wall at y = 6.4, sensor at y = 5.75
+        array([[0.65]])
+        """
+        if self.caster is None:
+            raise ValueError("this model has no map (grid=None); pass expected ranges to "
+                             "log_likelihood_expected instead")
+        return self.caster.cast(sensor_poses(poses, self.sensor_offset), angles, dtype=dtype)
+
+    def log_likelihood_expected(self, ranges: ArrayLike, expected: ArrayLike) -> NDArray[np.float64]:
+        """Scan log-likelihoods ``(N,)`` from readings ``(B,)`` and expected ranges ``(N, B)``.
+
+        The sum of the beams' log pseudo-densities, times ``temper``. No beam
+        subsampling here: pass the beams you want.
+
+        Examples
+        --------
+        >>> m = BeamModel(None, 10.0, sigma_hit=0.2)
+        >>> z = np.array([2.0, 3.0, 10.0])
+        >>> ll = m.log_likelihood_expected(z, [[2.0, 3.0, 10.0], [2.5, 3.0, 10.0]])
+        >>> bool(ll[0] > ll[1])
+        True
+        """
+        z = check_ranges(ranges, self.max_range)
+        zs = np.asarray(expected)
+        if zs.ndim == 1:
+            zs = zs[None, :]
+        if zs.ndim != 2 or zs.shape[1] != z.shape[-1]:
+            raise ValueError(f"expected must have shape (N, {z.shape[-1]}); got {zs.shape}")
+        if zs.dtype != np.float32:
+            zs = np.asarray(zs, dtype=float)
+        ll = self.beam_log_pdf(z, np.minimum(zs, zs.dtype.type(self.max_range))).sum(axis=1, dtype=np.float64)
+        return ll * self.temper if self.temper != 1.0 else ll
+
+    def log_likelihood(self, poses: ArrayLike, ranges: ArrayLike, angles: ArrayLike) -> NDArray[np.float64]:
+        """Log-likelihood ``(N,)`` of one scan for each robot pose.
+
+        Parameters
+        ----------
+        poses : array_like, shape (N, 3)
+            Robot poses (NaN raises; poses outside the map read 0 on every
+            beam, see :mod:`localize.raycast`).
+        ranges, angles : array_like, shape (B,)
+            The scan: readings (>= max_range = no return) and beam angles in
+            the sensor frame.
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> g = office()
+        >>> m = BeamModel(g, 8.0, method="march")
+        >>> angles = np.linspace(-np.pi / 2, np.pi / 2, 19)
+        >>> true = np.array([[6.0, 5.5, 0.3]])
+        >>> z = m.expected(true, angles)[0]
+        >>> ll = m.log_likelihood(np.array([[6.0, 5.5, 0.3], [6.0, 5.8, 0.3]]), z, angles)
+        >>> bool(ll[0] > ll[1] + 10)
+        True
+        """
+        z, a = self._prepare(ranges, angles)
+        zs = self.expected(poses, a, dtype=np.float32)
+        ll = self.beam_log_pdf(z, zs).sum(axis=1, dtype=np.float64)
+        return ll * self.temper if self.temper != 1.0 else ll
+
+    def sample_expected(self, expected: ArrayLike, rng: np.random.Generator) -> NDArray[np.float64]:
+        """Draw readings from the mixture given expected ranges (any shape).
+
+        Each beam first picks a component with the mixture weights, then
+        draws from it by inverting its CDF: the truncated normal, the
+        truncated exponential, ``max_range``, or uniform.
+
+        Examples
+        --------
+        >>> m = BeamModel(None, 10.0)
+        >>> z = m.sample_expected(np.full(20000, 4.0), np.random.default_rng(0))
+        >>> round(float(np.mean(z == 10.0)), 2), bool(z.min() >= 0)
+        (0.05, True)
+        """
+        rng = _check_rng(rng)
+        zs = np.clip(np.asarray(expected, dtype=float), self.z_floor, self.max_range)
+        zmax, sig, lam = self.max_range, self.sigma_hit, self.lambda_short
+        k = rng.choice(4, size=zs.shape, p=[self.z_hit, self.z_short, self.z_max, self.z_rand])
+        u = rng.random(zs.shape)
+        lo, hi = ndtr(-zs / sig), ndtr((zmax - zs) / sig)
+        hit = zs + sig * ndtri(np.clip(lo + u * (hi - lo), 1e-300, 1 - 1e-16))
+        short = -np.log1p(u * np.expm1(-lam * zs)) / lam
+        rand = u * zmax
+        z = np.choose(k, [hit, short, np.full(zs.shape, zmax), rand])
+        return np.clip(z, 0.0, zmax)
+
+    def sample(self, poses: ArrayLike, angles: ArrayLike, rng: np.random.Generator) -> NDArray[np.float64]:
+        """Simulated scans ``(N, B)`` from robot ``poses`` (ray cast, then :meth:`sample_expected`).
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> m = BeamModel(office(), 8.0, method="march")
+        >>> z = m.sample([[6.0, 5.5, 0.0]], np.linspace(-1, 1, 5), np.random.default_rng(1))
+        >>> z.shape, bool(np.all((0 <= z) & (z <= 8.0)))
+        ((1, 5), True)
+        """
+        rng = _check_rng(rng)
+        return self.sample_expected(self.expected(poses, angles), rng)
+
+
+# -------------------------------------------------------- likelihood field
+class LikelihoodField:
+    """The likelihood-field (end-point) model, PR table 6.3 (ROS AMCL's default).
+
+    Each beam that returned (``z < max_range``) is projected to its end point
+    in the world; the end point is scored by the distance ``d`` to the
+    nearest obstacle: ``p = z_hit N(d; 0, sigma_hit^2) + z_rand / max_range``.
+    Max-range readings are skipped, as in PR. There is no ray casting: the
+    per-cell log-probabilities are precomputed once from the map's distance
+    field, and a scan costs one table lookup per beam.
+
+    End points outside the map get the distance ``max_dist``, like AMCL's
+    ``laser_likelihood_max_dist``: the map says nothing there. Distances
+    are capped at ``max_dist`` everywhere.
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+    max_range : float
+    z_hit, z_rand : float
+        Weights in [0, 1]; ``z_hit + z_rand`` must be 1 within 1e-6 (PR's
+        ``z_max`` has no role since max-range readings are skipped).
+    sigma_hit : float
+        Standard deviation of the end-point error (metres), > 0.
+    max_dist : float, optional
+        Distance assigned to end points off the map, and the cap on the
+        distance field. Default: ``4 * sigma_hit``, which scores an end
+        point far from any wall like one clearly missing.
+    sensor_offset, max_beams, temper
+        As for :class:`BeamModel`.
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> lf = LikelihoodField(office(), 8.0, z_hit=0.9, z_rand=0.1, sigma_hit=0.1)
+    >>> angles = np.linspace(-np.pi / 2, np.pi / 2, 19)
+    >>> bm = BeamModel(office(), 8.0, method="march")
+    >>> z = bm.expected([[6.0, 5.5, 0.3]], angles)[0]
+    >>> ll = lf.log_likelihood([[6.0, 5.5, 0.3], [6.0, 5.8, 0.3]], z, angles)
+    >>> bool(ll[0] > ll[1])
+    True
+    """
+
+    def __init__(self, grid: OccupancyGrid, max_range: float, z_hit: float = 0.9, z_rand: float = 0.1,
+                 sigma_hit: float = 0.2, *, max_dist: float | None = None,
+                 sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
+                 temper: float = 1.0) -> None:
+        self.grid = _check_grid(grid)
+        self.max_range = _check_max_range(max_range)
+        w = _weights(("z_hit", "z_rand"), (z_hit, z_rand))
+        self.z_hit, self.z_rand = float(w[0]), float(w[1])
+        self.sigma_hit = _positive("sigma_hit", sigma_hit)
+        self.max_dist = 4.0 * self.sigma_hit if max_dist is None else _positive("max_dist", max_dist)
+        self.sensor_offset = _offset(sensor_offset)
+        if max_beams is not None and int(max_beams) < 1:
+            raise ValueError(f"max_beams must be >= 1 or None; got {max_beams}")
+        self.max_beams = None if max_beams is None else int(max_beams)
+        self.temper = _check_temper(temper)
+        self._build()
+
+    def __repr__(self) -> str:
+        return (f"LikelihoodField(max_range={self.max_range:g}, z_hit={self.z_hit:g}, z_rand={self.z_rand:g}, "
+                f"sigma_hit={self.sigma_hit:g}, max_dist={self.max_dist:g})")
+
+    def point_log_prob(self, d: ArrayLike) -> NDArray[np.float64]:
+        """``log(z_hit N(d; 0, sigma_hit^2) + z_rand / max_range)`` for end-point distances ``d``.
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> lf = LikelihoodField(office(), 8.0, z_hit=0.9, z_rand=0.1, sigma_hit=0.1)
+        >>> lf.point_log_prob([0.0, 0.1, 1.0]).round(4)
+        array([ 1.2818,  0.784 , -4.29  ])
+        """
+        d = np.minimum(np.asarray(d, dtype=float), self.max_dist)
+        g = self.z_hit * np.exp(-0.5 * (d / self.sigma_hit) ** 2) / (self.sigma_hit * _SQRT2PI)
+        return np.log(g + self.z_rand / self.max_range)
+
+    def _build(self) -> None:
+        g = self.grid
+        res = g.resolution
+        pad = int(math.ceil(self.max_range / res)) + 2
+        rows, cols = g.shape
+        table = np.full((rows + 2 * pad, cols + 2 * pad), float(self.point_log_prob(self.max_dist)))
+        table[pad:pad + rows, pad:pad + cols] = self.point_log_prob(g.distance_field)
+        self._pad = pad
+        self._table = table.astype(np.float32)
+        self._flat = self._table.ravel()
+        self._wp = cols + 2 * pad
+
+    @property
+    def table(self) -> NDArray[np.float32]:
+        """Per-cell end-point log-probability, padded by ``max_range`` on every side."""
+        return self._table
+
+    def endpoints(self, poses: ArrayLike, ranges: ArrayLike, angles: ArrayLike) -> NDArray[np.float64]:
+        """World end points ``(N, B, 2)`` of the beams (readable helper for figures and tests).
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> lf = LikelihoodField(office(), 8.0)
+        >>> lf.endpoints([[1.0, 1.0, np.pi / 2]], [2.0], [0.0]).round(6)
+        array([[[1., 3.]]])
+        """
+        sp = sensor_poses(poses, self.sensor_offset)
+        z = np.asarray(ranges, dtype=float)
+        a = sp[:, 2:3] + np.asarray(angles, dtype=float)[None, :]
+        return np.stack([sp[:, 0:1] + z * np.cos(a), sp[:, 1:2] + z * np.sin(a)], axis=-1)
+
+    def log_likelihood_reference(self, poses: ArrayLike, ranges: ArrayLike, angles: ArrayLike) -> NDArray:
+        """Readable version of :meth:`log_likelihood` (PR table 6.3 line by line): the test oracle.
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> lf = LikelihoodField(office(), 8.0)
+        >>> pose, z, a = [[6.0, 5.5, 0.0]], [0.9, 8.0], [np.pi / 2, 0.0]
+        >>> bool(np.isclose(lf.log_likelihood_reference(pose, z, a), lf.log_likelihood(pose, z, a), atol=1e-4)[0])
+        True
+        """
+        z, a = self._prepare(ranges, angles)
+        sp = sensor_poses(poses, self.sensor_offset)
+        out = np.zeros(sp.shape[0])
+        for n, (x, y, th) in enumerate(sp):
+            q = 0.0
+            for zk, ak in zip(z, a):
+                if zk >= self.max_range:
+                    continue
+                ex, ey = x + zk * math.cos(th + ak), y + zk * math.sin(th + ak)
+                d = self.grid.distance_at([ex, ey], outside=self.max_dist)
+                q += float(self.point_log_prob(d))
+            out[n] = q * self.temper
+        return out
+
+    def _prepare(self, ranges: ArrayLike, angles: ArrayLike):
+        a = _check_angles(angles)
+        z = check_ranges(ranges, self.max_range)
+        if z.ndim != 1 or z.shape != a.shape:
+            raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
+        sel = select_beams(a.size, self.max_beams)
+        z, a = z[sel], a[sel]
+        keep = z < self.max_range
+        return z[keep], a[keep]
+
+    def log_likelihood(self, poses: ArrayLike, ranges: ArrayLike, angles: ArrayLike) -> NDArray[np.float64]:
+        """Log-likelihood ``(N,)`` of one scan for each robot pose (vectorised end-point lookups).
+
+        Max-range readings are skipped. End points off the map score as at
+        ``max_dist``; poses far outside the map are clipped onto the padded
+        table's border cells, which hold that score.
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> lf = LikelihoodField(office(), 8.0, sigma_hit=0.1)
+        >>> ll = lf.log_likelihood([[6.0, 5.5, 0.0], [6.0, 5.2, 0.0]], [0.9], [np.pi / 2])
+        >>> bool(ll[0] > ll[1])    # 0.9 m to the wall at y = 6.4 fits the first pose
+        True
+        """
+        z, a = self._prepare(ranges, angles)
+        sp = sensor_poses(poses, self.sensor_offset)
+        n = sp.shape[0]
+        if z.size == 0:
+            return np.zeros(n)
+        g = self.grid
+        inv = 1.0 / g.resolution
+        f32 = np.float32
+        # end point in (padded) cell units: p + R(theta) (z cos a, z sin a)
+        bx = (z * np.cos(a) * inv).astype(f32)
+        by = (z * np.sin(a) * inv).astype(f32)
+        c = np.cos(sp[:, 2]).astype(f32)[:, None]
+        s = np.sin(sp[:, 2]).astype(f32)[:, None]
+        x0 = ((sp[:, 0] - g.origin[0]) * inv + self._pad).astype(f32)[:, None]
+        y0 = ((sp[:, 1] - g.origin[1]) * inv + self._pad).astype(f32)[:, None]
+        ex = c * bx
+        ex -= s * by
+        ex += x0
+        ey = s * bx
+        ey += c * by
+        ey += y0
+        rows_p, cols_p = self._table.shape
+        lo_x, lo_y = float(x0.min()) if n else 0.0, float(y0.min()) if n else 0.0
+        hi_x, hi_y = float(x0.max()) if n else 0.0, float(y0.max()) if n else 0.0
+        reach = self.max_range * inv + 1
+        if lo_x - reach < 0 or lo_y - reach < 0 or hi_x + reach >= cols_p or hi_y + reach >= rows_p:
+            np.clip(ex, 0, cols_p - 1, out=ex)
+            np.clip(ey, 0, rows_p - 1, out=ey)
+        j = ex.astype(np.int32)
+        i = ey.astype(np.int32)
+        i *= self._wp
+        i += j
+        ll = self._flat.take(i).sum(axis=1, dtype=np.float64)
+        return ll * self.temper if self.temper != 1.0 else ll
+
+    def sample(self, poses: ArrayLike, angles: ArrayLike, rng: np.random.Generator,
+               method: str = "march") -> NDArray[np.float64]:
+        """Simulated scans ``(N, B)``: ray-cast ranges plus Gaussian noise, random readings with prob. ``z_rand``.
+
+        The likelihood field is not a generative model of ranges; this is
+        the matching simulator (end points near obstacles, occasional random
+        readings) used to test it.
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> lf = LikelihoodField(office(), 8.0)
+        >>> lf.sample([[6.0, 5.5, 0.0]], np.linspace(-1, 1, 4), np.random.default_rng(0)).shape
+        (1, 4)
+        """
+        rng = _check_rng(rng)
+        a = _check_angles(angles)
+        zs = RayCaster(self.grid, self.max_range, method=method).cast(sensor_poses(poses, self.sensor_offset), a)
+        z = zs + rng.normal(0.0, self.sigma_hit, zs.shape)
+        rand = rng.random(zs.shape) < self.z_rand
+        z = np.where(rand, rng.uniform(0, self.max_range, zs.shape), z)
+        z = np.where(zs >= self.max_range, self.max_range, z)
+        return np.clip(z, 0.0, self.max_range)
+
+
+# ----------------------------------------------------------- landmark model
+class LandmarkModel:
+    """Range and bearing to identified point landmarks (PR section 6.6, table 6.4).
+
+    A sighting of landmark ``l`` at ``(mx, my)`` from pose ``(x, y, theta)``
+    is ``z = (r, phi)`` with
+
+    ``r = sqrt((mx - x)^2 + (my - y)^2) + e_r``,
+    ``phi = atan2(my - y, mx - x) - theta + e_phi``,
+
+    ``e_r ~ N(0, sigma_range^2)``, ``e_phi ~ N(0, sigma_bearing^2)``,
+    independent; bearings wrapped to ``[-pi, pi)``. (PR also includes a
+    signature; identities are given here as ``ids``.)
+
+    Parameters
+    ----------
+    landmarks : array_like, shape (L, 2)
+    sigma_range : float
+        Metres, > 0.
+    sigma_bearing : float
+        Radians, > 0.
+
+    Examples
+    --------
+    >>> lm = LandmarkModel([[2.0, 0.0], [0.0, 3.0]], 0.1, 0.05)
+    >>> lm.expected([[0.0, 0.0, 0.0]]).round(4)
+    array([[[2.    , 0.    ],
+            [3.    , 1.5708]]])
+    """
+
+    def __init__(self, landmarks: ArrayLike, sigma_range: float, sigma_bearing: float) -> None:
+        lm = np.asarray(landmarks, dtype=float)
+        if lm.ndim != 2 or lm.shape[1] != 2 or lm.shape[0] == 0:
+            raise ValueError(f"landmarks must be an (L, 2) array of (x, y) with L >= 1; got shape {lm.shape}")
+        if not np.all(np.isfinite(lm)):
+            raise ValueError("landmarks must be finite")
+        lm.setflags(write=False)
+        self.landmarks = lm
+        self.sigma_range = _positive("sigma_range", sigma_range)
+        self.sigma_bearing = _positive("sigma_bearing", sigma_bearing)
+
+    def __repr__(self) -> str:
+        return (f"LandmarkModel({len(self.landmarks)} landmarks, sigma_range={self.sigma_range:g}, "
+                f"sigma_bearing={self.sigma_bearing:g})")
+
+    @property
+    def R(self) -> NDArray[np.float64]:
+        """Measurement noise covariance ``diag(sigma_range^2, sigma_bearing^2)`` (for the EKF)."""
+        return np.diag([self.sigma_range ** 2, self.sigma_bearing ** 2])
+
+    def _ids(self, ids: ArrayLike | None) -> NDArray[np.intp]:
+        if ids is None:
+            return np.arange(len(self.landmarks))
+        k = np.asarray(ids)
+        if k.ndim == 0:
+            k = k.reshape(1)
+        if k.size == 0:
+            return np.zeros(0, dtype=np.intp)
+        if k.ndim != 1 or not np.issubdtype(k.dtype, np.integer):
+            raise ValueError(f"ids must be a 1-D array of integer landmark indices; got {k!r}")
+        if k.size and (k.min() < 0 or k.max() >= len(self.landmarks)):
+            raise ValueError(f"ids must lie in 0..{len(self.landmarks) - 1}; got {k.tolist()}")
+        return k.astype(np.intp)
+
+    def expected(self, poses: ArrayLike, ids: ArrayLike | None = None) -> NDArray[np.float64]:
+        """Noise-free ``(range, bearing)`` of landmarks ``ids`` (default all): shape ``(N, L, 2)``.
+
+        Examples
+        --------
+        >>> LandmarkModel([[1.0, 1.0]], 0.1, 0.1).expected([0.0, 0.0, np.pi / 2]).round(4)
+        array([[[ 1.4142, -0.7854]]])
+        """
+        p = as_poses(poses, "poses")
+        if p.ndim == 1:
+            p = p[None, :]
+        m = self.landmarks[self._ids(ids)]
+        dx = m[None, :, 0] - p[:, None, 0]
+        dy = m[None, :, 1] - p[:, None, 1]
+        r = np.hypot(dx, dy)
+        b = wrap_angle(np.arctan2(dy, dx) - p[:, None, 2])
+        return np.stack([r, np.asarray(b).reshape(r.shape)], axis=-1)
+
+    def log_likelihood(self, poses: ArrayLike, z: ArrayLike, ids: ArrayLike) -> NDArray[np.float64]:
+        """Log-likelihood ``(N,)`` of sightings ``z`` ``(K, 2)`` of landmarks ``ids`` ``(K,)``.
+
+        Gaussian in range and in the wrapped bearing difference. No
+        sightings (K = 0) gives zeros.
+
+        Examples
+        --------
+        >>> lm = LandmarkModel([[2.0, 0.0]], 0.1, 0.05)
+        >>> ll = lm.log_likelihood([[0, 0, 0], [0.2, 0, 0]], [[2.0, 0.0]], [0])
+        >>> bool(ll[0] > ll[1])
+        True
+        """
+        k = self._ids(ids)
+        zz = np.asarray(z, dtype=float).reshape(-1, 2) if np.size(z) else np.zeros((0, 2))
+        if zz.shape[0] != k.shape[0]:
+            raise ValueError(f"z has {zz.shape[0]} sightings but ids has {k.shape[0]}")
+        if not np.all(np.isfinite(zz)):
+            raise ValueError("z must be finite (range, bearing) pairs")
+        if (zz[:, 0] < 0).any():
+            raise ValueError("measured ranges in z must be >= 0")
+        p = as_poses(poses, "poses")
+        if p.ndim == 1:
+            p = p[None, :]
+        if k.size == 0:
+            return np.zeros(p.shape[0])
+        e = self.expected(p, k)
+        dr = (zz[None, :, 0] - e[..., 0]) / self.sigma_range
+        db = np.asarray(wrap_angle(zz[None, :, 1] - e[..., 1])) / self.sigma_bearing
+        const = math.log(2 * math.pi * self.sigma_range * self.sigma_bearing)
+        return (-0.5 * (dr ** 2 + db ** 2) - const).sum(axis=1)
+
+    def sample(self, pose: ArrayLike, rng: np.random.Generator, ids: ArrayLike | None = None) -> NDArray[np.float64]:
+        """A noisy sighting ``(K, 2)`` of landmarks ``ids`` (default all) from one pose.
+
+        Examples
+        --------
+        >>> lm = LandmarkModel([[2.0, 0.0], [0.0, 3.0]], 0.1, 0.05)
+        >>> lm.sample([0.0, 0.0, 0.0], np.random.default_rng(0)).shape
+        (2, 2)
+        """
+        rng = _check_rng(rng)
+        p = as_poses(pose, "pose").reshape(-1, 3)
+        if p.shape[0] != 1:
+            raise ValueError(f"pose must be a single (x, y, theta); got shape {np.shape(pose)}")
+        e = self.expected(p, ids)[0]
+        noise = rng.normal(size=e.shape) * np.array([self.sigma_range, self.sigma_bearing])
+        z = e + noise
+        z[:, 0] = np.abs(z[:, 0])
+        z[:, 1] = wrap_angle(z[:, 1])
+        return z
+
+    def jacobian(self, pose: ArrayLike, landmark_id: int) -> NDArray[np.float64]:
+        """Jacobian ``(2, 3)`` of ``(range, bearing)`` with respect to ``(x, y, theta)`` (PR eq. 7.14).
+
+        ``H = [[-dx/r, -dy/r, 0], [dy/r^2, -dx/r^2, -1]]`` with
+        ``(dx, dy)`` from the robot to the landmark. Raises ``ValueError``
+        when the robot sits on the landmark (``r = 0``).
+
+        Examples
+        --------
+        >>> lm = LandmarkModel([[3.0, 4.0]], 0.1, 0.05)
+        >>> lm.jacobian([0.0, 0.0, 0.0], 0).round(4)
+        array([[-0.6 , -0.8 ,  0.  ],
+               [ 0.16, -0.12, -1.  ]])
+        """
+        p = as_poses(pose, "pose").reshape(-1)
+        if p.shape != (3,):
+            raise ValueError(f"pose must be a single (x, y, theta); got shape {np.shape(pose)}")
+        k = int(self._ids([int(landmark_id)])[0])
+        dx, dy = self.landmarks[k] - p[:2]
+        q = dx * dx + dy * dy
+        if q == 0:
+            raise ValueError(f"the pose coincides with landmark {k}: the bearing is undefined")
+        r = math.sqrt(q)
+        return np.array([[-dx / r, -dy / r, 0.0], [dy / q, -dx / q, -1.0]])

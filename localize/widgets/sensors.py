@@ -1,0 +1,185 @@
+"""Interactive tools of the sensor-model chapter.
+
+* :func:`pseudo_density_figure` / :func:`beam_density_widget`: sliders for the
+  six intrinsic parameters of the beam model redraw its pseudo-density.
+* :func:`pose_scan_figure` / :func:`pose_scan_widget`: place a pose on the map
+  (x, y, heading sliders) and compare its ray-cast scan with a measured one;
+  the title shows the scan's log-likelihood and its weight relative to the
+  true pose.
+
+The ``*_figure`` callbacks are plain functions (parameters in, Figure out),
+unit-tested without a browser; the ``*_widget`` builders only wire sliders to
+them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..grid import OccupancyGrid
+from ..sensors import BeamModel
+
+__all__ = ["normalise_weights", "pseudo_density_figure", "beam_density_widget", "pose_scan_figure",
+           "pose_scan_widget"]
+
+
+def normalise_weights(z_hit: float, z_short: float, z_max: float, z_rand: float) -> tuple[float, float, float, float]:
+    """Scale four non-negative slider values so that they sum to one.
+
+    Four independent sliders cannot keep a sum of one; the widget divides
+    by their sum (and shows the result). All zero raises ``ValueError``.
+
+    Examples
+    --------
+    >>> normalise_weights(2, 1, 0.5, 0.5)
+    (0.5, 0.25, 0.125, 0.125)
+    """
+    w = np.array([z_hit, z_short, z_max, z_rand], dtype=float)
+    if np.any(~np.isfinite(w)) or np.any(w < 0):
+        raise ValueError(f"the mixture weights must be finite and >= 0; got {w.tolist()}")
+    if w.sum() <= 0:
+        raise ValueError("at least one mixture weight must be positive")
+    w = w / w.sum()
+    return tuple(float(v) for v in w)  # type: ignore[return-value]
+
+
+def pseudo_density_figure(z_hit: float = 0.7, z_short: float = 0.1, z_max: float = 0.1, z_rand: float = 0.1,
+                          sigma_hit: float = 0.2, lambda_short: float = 0.5, z_expected: float = 5.0,
+                          max_range: float = 10.0):
+    """The beam model's pseudo-density for the given parameters (weights normalised).
+
+    Returns the matplotlib Figure; its title lists the normalised weights.
+
+    Examples
+    --------
+    >>> fig = pseudo_density_figure(z_hit=1, z_short=1, z_max=1, z_rand=1)
+    >>> fig.axes[0].get_title()
+    'z_hit 0.25, z_short 0.25, z_max 0.25, z_rand 0.25, sigma_hit 0.2 m, lambda_short 0.5 /m'
+    """
+    import matplotlib.pyplot as plt
+
+    from ..plot.sensors import plot_beam_pdf
+
+    w = normalise_weights(z_hit, z_short, z_max, z_rand)
+    model = BeamModel(None, max_range, *w, sigma_hit=sigma_hit, lambda_short=lambda_short)
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    plot_beam_pdf(model, z_expected, ax=ax)
+    ax.set_title(f"z_hit {w[0]:.2f}, z_short {w[1]:.2f}, z_max {w[2]:.2f}, z_rand {w[3]:.2f}, "
+                 f"sigma_hit {sigma_hit:g} m, lambda_short {lambda_short:g} /m", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def beam_density_widget(max_range: float = 10.0):
+    """Sliders for ``z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short`` and ``z*``.
+
+    Returns the ``ipywidgets.interactive`` object (display it in a notebook).
+
+    Examples
+    --------
+    >>> import contextlib, io
+    >>> with contextlib.redirect_stdout(io.StringIO()):   # outside a notebook the widget prints codes
+    ...     wid = beam_density_widget()
+    >>> [c.description for c in wid.children[:3]]
+    ['z_hit', 'z_short', 'z_max']
+    >>> import matplotlib.pyplot as plt; plt.close("all")
+    """
+    import ipywidgets as w
+
+    def slider(value, lo, hi, step, desc):
+        return w.FloatSlider(value=value, min=lo, max=hi, step=step, description=desc,
+                             continuous_update=False, readout_format=".2f")
+
+    return w.interactive(
+        pseudo_density_figure,
+        z_hit=slider(0.7, 0.0, 1.0, 0.05, "z_hit"),
+        z_short=slider(0.1, 0.0, 1.0, 0.05, "z_short"),
+        z_max=slider(0.1, 0.0, 1.0, 0.05, "z_max"),
+        z_rand=slider(0.1, 0.0, 1.0, 0.05, "z_rand"),
+        sigma_hit=slider(0.2, 0.02, 1.0, 0.02, "sigma_hit"),
+        lambda_short=slider(0.5, 0.05, 3.0, 0.05, "lambda_short"),
+        z_expected=slider(5.0, 0.5, max_range, 0.25, "z*"),
+        max_range=w.fixed(float(max_range)),
+    )
+
+
+def pose_scan_figure(grid: OccupancyGrid, model, angles: ArrayLike, measured: ArrayLike, x: float, y: float,
+                     theta_deg: float, reference_pose: ArrayLike | None = None):
+    """Map, the chosen pose's ray-cast scan against the measured scan, and the resulting weight.
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+    model : BeamModel or LikelihoodField
+        Anything with ``log_likelihood(poses, ranges, angles)``; a
+        :class:`BeamModel` also draws the expected scan.
+    angles, measured : array_like
+        The measured scan.
+    x, y, theta_deg : float
+        The pose to test (heading in degrees, for the slider).
+    reference_pose : array_like, optional
+        Usually the true pose: the title then gives the weight of the chosen
+        pose relative to it, ``exp(ll - ll_ref)``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Its ``log_likelihood`` attribute holds the value shown.
+    """
+    import matplotlib.pyplot as plt
+
+    from ..plot.sensors import plot_ranges, plot_scan_on_map
+
+    pose = np.array([x, y, np.radians(theta_deg)])
+    angles = np.asarray(angles, dtype=float)
+    measured = np.asarray(measured, dtype=float)
+    ll = float(model.log_likelihood(pose[None], measured, angles)[0])
+    expected = model.expected(pose[None], angles)[0] if hasattr(model, "expected") else None
+    offset = getattr(model, "sensor_offset", (0.0, 0.0, 0.0))
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 4), gridspec_kw={"width_ratios": [1.6, 1]})
+    plot_scan_on_map(grid, pose, angles, measured=measured, expected=expected, max_range=model.max_range, ax=ax0,
+                     sensor_offset=offset)
+    plot_ranges(angles, measured=measured, expected=expected, max_range=model.max_range, ax=ax1)
+    title = f"pose ({x:.2f} m, {y:.2f} m, {theta_deg:.0f} deg): log-likelihood {ll:.1f}"
+    if reference_pose is not None:
+        ref = float(model.log_likelihood(np.asarray(reference_pose, dtype=float)[None], measured, angles)[0])
+        rel = ll - ref
+        title += f", weight relative to the true pose exp({rel:.1f})"
+    ax0.set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.log_likelihood = ll
+    return fig
+
+
+def pose_scan_widget(grid: OccupancyGrid, model, angles: ArrayLike, measured: ArrayLike,
+                     start: ArrayLike = (1.0, 1.0, 0.0), reference_pose: ArrayLike | None = None):
+    """Sliders placing a pose on the map (x, y in metres, heading in degrees); see :func:`pose_scan_figure`.
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> from localize.sensors import LikelihoodField
+    >>> g = office()
+    >>> import contextlib, io
+    >>> with contextlib.redirect_stdout(io.StringIO()):   # outside a notebook the widget prints codes
+    ...     wid = pose_scan_widget(g, LikelihoodField(g, 8.0), [0.0], [1.0], start=(6.0, 5.5, 0.0))
+    >>> [c.description for c in wid.children[:3]]
+    ['x [m]', 'y [m]', 'heading [deg]']
+    >>> import matplotlib.pyplot as plt; plt.close("all")
+    """
+    import ipywidgets as w
+
+    xmin, xmax, ymin, ymax = grid.extent
+    step = max(grid.resolution, 0.05)
+    return w.interactive(
+        pose_scan_figure,
+        grid=w.fixed(grid), model=w.fixed(model), angles=w.fixed(np.asarray(angles)),
+        measured=w.fixed(np.asarray(measured)), reference_pose=w.fixed(reference_pose),
+        x=w.FloatSlider(value=float(start[0]), min=xmin, max=xmax - 1e-6, step=step, description="x [m]",
+                        continuous_update=False),
+        y=w.FloatSlider(value=float(start[1]), min=ymin, max=ymax - 1e-6, step=step, description="y [m]",
+                        continuous_update=False),
+        theta_deg=w.FloatSlider(value=float(np.degrees(start[2])), min=-180, max=180, step=2,
+                                description="heading [deg]", continuous_update=False),
+    )

@@ -1,0 +1,250 @@
+"""Tests of the command line (localize.cli, ``python -m localize``) on simulated CMU-format data."""
+
+from __future__ import annotations
+
+import csv
+import io as stdio
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from localize import cli, io, maps, sim
+from localize.geometry import angle_diff
+
+
+@pytest.fixture(scope="module")
+def sim_files(tmp_path_factory):
+    """A simulated robot in the office world, written as a CMU map and a CMU log."""
+    d = tmp_path_factory.mktemp("cli")
+    grid = maps.office(0.1)
+    run = sim.range_run(grid, np.random.default_rng(4), n_steps=80, dt=0.5, speed=0.4,
+                        sensor_offset=(0.25, 0.0, 0.0), max_range=12.0, n_clutter=3)
+    return io.write_cmu_map(d / "office.dat", grid), sim.write_cmu_log(d / "office.log", run), run
+
+
+def run_cli(*argv):
+    out, err = stdio.StringIO(), stdio.StringIO()
+    status = cli.main([str(a) for a in argv], stdout=out, stderr=err)
+    return status, out.getvalue(), err.getvalue()
+
+
+def test_run_localizes_globally_and_writes_outputs(sim_files, tmp_path):
+    map_path, log_path, run = sim_files
+    status, out, err = run_cli("run", "--map", map_path, "--log", log_path, "--particles", 3000, "--seed", 2,
+                               "--out", tmp_path / "o")
+    assert status == 0, err
+    assert err == ""  # not a terminal: no progress bar
+    assert "80 scans, 3000 particles" in out and "trajectory.csv" in out
+    rows = list(csv.DictReader(open(tmp_path / "o" / "trajectory.csv")))
+    assert len(rows) == len(run) and list(rows[0])[:4] == ["time", "x", "y", "theta"]
+    est = np.array([[float(r["x"]), float(r["y"]), float(r["theta"])] for r in rows])
+    assert np.allclose([float(r["time"]) for r in rows], run.times, atol=1e-6)
+    # global localization found the robot: the last 20 estimates are close to the true poses
+    err_xy = np.hypot(*(est[-20:, :2] - run.poses[-20:, :2]).T)
+    assert np.median(err_xy) < 0.3
+    assert np.median(np.abs(angle_diff(est[-20:, 2], run.poses[-20:, 2]))) < np.radians(10)
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    for key in ("particles", "scans", "seconds_per_scan", "real_time_factor", "convergence_step", "settings"):
+        assert key in s
+    assert s["particles"] == 3000 and s["scans"] == 80 and s["real_time_factor"] > 0
+    assert s["convergence_step"] is not None and s["convergence_step"] < 70
+    assert s["settings"]["log_format"] == "cmu" and s["settings"]["seed"] == 2
+
+
+def test_same_seed_same_trajectory(sim_files, tmp_path):
+    map_path, log_path, _ = sim_files
+    args = ["run", "--map", map_path, "--log", log_path, "--particles", 300, "--scans", "0:15", "--quiet"]
+    assert run_cli(*args, "--seed", 5, "--out", tmp_path / "a")[0] == 0
+    assert run_cli(*args, "--seed", 5, "--out", tmp_path / "b")[0] == 0
+    assert run_cli(*args, "--seed", 6, "--out", tmp_path / "c")[0] == 0
+    a, b, c = ((tmp_path / x / "trajectory.csv").read_text() for x in "abc")
+    assert a == b and a != c and len(a.splitlines()) == 16
+
+
+def test_tracking_with_reference_poses_and_build_map(tmp_path):
+    """A CARMEN log with reference poses: --build-map, --track, error columns in the outputs."""
+    grid = maps.office(0.1)
+    run = sim.range_run(grid, np.random.default_rng(8), n_steps=40, dt=0.5, angles=io.carmen_angles(181),
+                        max_range=12.0, sensor="ideal")
+    log = io.LaserLog(times=run.times, odometry=run.poses, ranges=run.ranges, angles=run.angles,
+                      max_range=run.max_range)
+    path = io.write_carmen_log(tmp_path / "sim.log.gz", log)  # both pose triples equal: reference poses
+    status, out, err = run_cli("run", "--log", path, "--build-map", "--resolution", 0.1, "--track",
+                               "--particles", 500, "--out", tmp_path / "t")
+    assert status == 0, err
+    rows = list(csv.DictReader(open(tmp_path / "t" / "trajectory.csv")))
+    assert {"ref_x", "ref_y", "ref_theta", "error"} <= set(rows[0])
+    assert np.median([float(r["error"]) for r in rows]) < 0.1
+    s = json.loads((tmp_path / "t" / "summary.json").read_text())
+    assert s["convergence_step_reference"] == 0 and s["median_error_m"] < 0.1
+    assert "median error" in out
+    # the map sub-command writes a map_server map that the run command reads back
+    status, out, err = run_cli("map", "--log", path, "--out", tmp_path / "m" / "office.yaml", "--resolution", 0.1)
+    assert status == 0, err
+    g = io.read_map(tmp_path / "m" / "office.yaml")
+    assert g.resolution == pytest.approx(0.1) and g.occupied.sum() > 200
+
+
+def test_animation_gif(sim_files, tmp_path):
+    map_path, log_path, _ = sim_files
+    status, _, err = run_cli("run", "--map", map_path, "--log", log_path, "--particles", 200, "--scans", "0:6",
+                             "--animate", "--frames", 3, "--quiet", "--out", tmp_path / "g")
+    assert status == 0, err
+    gif = tmp_path / "g" / "particles.gif"
+    assert gif.read_bytes()[:6] in (b"GIF89a", b"GIF87a")
+    from PIL import Image
+
+    with Image.open(gif) as im:
+        assert im.n_frames >= 3
+    s = json.loads((tmp_path / "g" / "summary.json").read_text())
+    assert "particles.gif" in s["animation"]
+
+
+def test_progress_bar_only_on_a_terminal():
+    class Tty(stdio.StringIO):
+        def isatty(self):
+            return True
+
+    t = Tty()
+    p = cli.Progress(4, stream=t, width=8)
+    for k in range(1, 5):
+        p.update(k)
+    p.close()
+    assert "[########] 4/4 scans" in t.getvalue() and t.getvalue().endswith("\n")
+    piped = stdio.StringIO()
+    p = cli.Progress(4, stream=piped)
+    p.update(4)
+    p.close()
+    assert piped.getvalue() == ""
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["run", "--log", "LOG"], "give --map FILE, or --build-map"),
+        (["run", "--log", "LOG", "--map", "MAP", "--build-map"], "either --map or --build-map"),
+        (["run", "--log", "LOG", "--build-map"], "needs reference poses"),
+        (["run", "--log", "LOG", "--map", "LOG"], "cannot tell the map format"),
+        (["run", "--log", "MAP", "--map", "MAP"], "cannot tell the log format"),
+        (["run", "--log", "LOG", "--map", "MAP", "--map-format", "ros"], "expected 'key: value'"),
+        (["run", "--log", "LOG", "--map", "MAP", "--not-free-is-occupied"], "ROS map_server maps only"),
+        (["run", "--log", "nothing.log", "--map", "MAP"], "nothing.log: no such file"),
+        (["map", "--log", "LOG", "--out", "x.yaml"], "no reference poses"),
+    ],
+)
+def test_errors_are_reported_without_traceback(sim_files, argv, message):
+    map_path, log_path, _ = sim_files
+    argv = [str(log_path) if a == "LOG" else str(map_path) if a == "MAP" else a for a in argv]
+    status, out, err = run_cli(*argv)
+    assert status == 2
+    assert err.startswith("localize: error: ") and message in err and "Traceback" not in err
+
+
+def test_bad_file_content_names_file_and_line(sim_files, tmp_path):
+    map_path, log_path, _ = sim_files
+    lines = log_path.read_text().splitlines()
+    lines[3] = lines[3][: len(lines[3]) // 2]  # a truncated record
+    bad = tmp_path / "bad.log"
+    bad.write_text("\n".join(lines) + "\n")
+    status, _, err = run_cli("run", "--map", map_path, "--log", bad)
+    assert status == 2 and f"{bad}:4: " in err and "188 fields" in err
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["run", "--log", "x", "--map", "y", "--particles", "0"], "expected a number >= 1"),
+        (["run", "--log", "x", "--map", "y", "--particles", "many"], "expected a whole number"),
+        (["run", "--log", "x", "--map", "y", "--sensor", "sonar"], "invalid choice"),
+        (["run", "--log", "x", "--map", "y", "--scans", "a:b"], "START:STOP"),
+        (["run", "--map", "y"], "--log"),
+        ([], "required"),
+    ],
+)
+def test_bad_arguments(argv, message, capsys):
+    status = cli.main(argv)
+    assert status == 2
+    assert message in capsys.readouterr().err
+
+
+def test_help_documents_every_option_with_an_example(capsys):
+    for sub in ("run", "map"):
+        assert cli.main([sub, "--help"]) == 0
+        text = capsys.readouterr().out
+        parser = cli.build_parser()
+        action = next(a for a in parser._actions if a.dest == "command")
+        subparser = action.choices[sub]
+        for a in subparser._actions:
+            if a.dest == "help":
+                continue
+            assert a.help, f"{sub} {a.option_strings} has no help"
+            flag = a.option_strings[0]
+            assert flag in text
+            takes_value = a.nargs != 0 and not isinstance(a.const, bool) and a.type is not None
+            if takes_value:
+                assert "Example" in a.help, f"{sub} {flag}: help has no example"
+        assert "example" in text.lower()
+
+
+def test_python_dash_m_entry_point(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "localize", "--help"], capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 0 and "usage: localize" in r.stdout and "run" in r.stdout
+
+
+def test_converged_at():
+    assert cli.converged_at([1.0, 0.1, 0.1, 0.1], hold=2) == 1
+    assert cli.converged_at([0.1, 1.0, 0.1], hold=2) == 2  # the end of the log counts
+    assert cli.converged_at([1.0, 1.0]) is None
+    with pytest.raises(ValueError, match="hold"):
+        cli.converged_at([0.1], hold=0)
+
+
+def test_localize_log_validates(sim_files):
+    map_path, log_path, _ = sim_files
+    grid, log = io.read_map(map_path), io.read_log(log_path)
+    with pytest.raises(TypeError, match="rng"):
+        cli.localize_log(grid, log, rng=None)
+    with pytest.raises(ValueError, match="init"):
+        cli.localize_log(grid, log, rng=np.random.default_rng(0), init="somewhere")
+    with pytest.raises(ValueError, match="reference poses"):
+        cli.localize_log(grid, log, rng=np.random.default_rng(0), init="reference")
+    with pytest.raises(ValueError, match="sensor must be"):
+        cli.make_sensor("sonar", grid, 10.0, np.zeros(3))
+    with pytest.raises(ValueError, match="alphas"):
+        cli.ReversibleOdometry((0.1, 0.1))
+
+
+def test_beam_sensor_runs(sim_files, tmp_path):
+    map_path, log_path, _ = sim_files
+    status, _, err = run_cli("run", "--map", map_path, "--log", log_path, "--sensor", "beam", "--particles", 200,
+                             "--scans", "0:5", "--quiet", "--out", tmp_path / "b")
+    assert status == 0, err
+    assert json.loads((tmp_path / "b" / "summary.json").read_text())["settings"]["sensor"] == "beam"
+
+
+def test_reversible_odometry_matches_plain_model_going_forward():
+    rng_a, rng_b = np.random.default_rng(3), np.random.default_rng(3)
+    from localize.motion import sample_odometry
+
+    u = ([0.0, 0.0, 0.1], [0.5, 0.1, 0.3])
+    p = np.zeros((1000, 3))
+    a = cli.ReversibleOdometry((0.05, 0.01, 0.02, 0.05))(p, u, rng_a)
+    b = sample_odometry(p, u, (0.05, 0.01, 0.02, 0.05), rng_b, min_trans=1e-3)
+    assert np.array_equal(a, b)
+    # backwards: mean displacement is the odometry's (within 5 standard errors), headings as reported
+    back = ([0.0, 0.0, 0.0], [-0.3, 0.0, 0.2])
+    q = cli.ReversibleOdometry((0.05, 0.01, 0.02, 0.05))(np.zeros((20000, 3)), back, np.random.default_rng(1))
+    se = q[:, 0].std() / np.sqrt(len(q))
+    assert abs(q[:, 0].mean() + 0.3) < 5 * se + 1e-3 and abs(np.median(q[:, 2]) - 0.2) < 0.01
+
+
+def test_dash_m_module_does_not_run_on_import():
+    import importlib
+
+    mod = importlib.import_module("localize.__main__")
+    assert hasattr(mod, "main")
+    assert Path(mod.__file__).name == "__main__.py"

@@ -1,0 +1,162 @@
+"""Validation on real robot data (../shared/data or $LOCALIZE_DATA); skipped cleanly when absent.
+
+* every CARMEN log and the Willow Garage ROS map read without error, with the
+  numbers the data's README states;
+* maps of the Intel lab and Freiburg 079 built from the corrected poses agree
+  with the scans;
+* MCL with the real scans and the real odometry increments tracks the corrected
+  poses (median position error < 0.15 m) from the first corrected pose;
+* global localization on the built maps converges (error < 0.5 m for 20 scans in
+  a row) within a stated number of scans in most seeds.
+
+Subsets of the scans keep the file under a minute on one core.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from localize import cli, io, mapping
+from localize.geometry import angle_diff, relative
+
+pytestmark = [pytest.mark.data, pytest.mark.slow]
+
+LOGS = {  # name: (scans, beams, README's median odometry error per scan: metres, degrees)
+    "intel": (910, 180, 0.05, 2.6),
+    "freiburg-079": (4791, 360, 0.03, 0.7),
+    "aces": (440, 180, None, None),
+    "csail": (406, 361, None, None),
+}
+EVERY = {"intel": 1, "freiburg-079": 4}  # scans used for mapping and global localization
+
+
+def carmen(shared_data, name):
+    p = shared_data / "carmen" / f"{name}-corrected.log.gz"
+    if not p.exists():
+        pytest.skip(f"{p} not found")
+    return p
+
+
+@pytest.fixture(scope="module")
+def logs(shared_data):
+    return {name: io.read_log(carmen(shared_data, name)) for name in ("intel", "freiburg-079")}
+
+
+@pytest.fixture(scope="module")
+def built(logs):
+    return {name: mapping.map_from_log(log, resolution=0.05, every=EVERY[name]) for name, log in logs.items()}
+
+
+@pytest.mark.parametrize("name", list(LOGS))
+def test_carmen_logs_read(shared_data, name):
+    scans, beams, odo_m, odo_deg = LOGS[name]
+    log = io.read_log(carmen(shared_data, name))
+    assert log.format == "carmen" and len(log) == scans and log.n_beams == beams
+    assert log.poses is not None and log.meta["odometry"].startswith("re-anchored")
+    assert np.allclose(log.sensor_offset, 0.0)
+    assert 40.0 <= log.max_range <= 82.0
+    assert log.no_return.mean() < 0.2
+    if odo_m is not None:
+        m, c = log.motions(), relative(log.poses[:-1], log.poses[1:])
+        e_xy = np.median(np.hypot(*(m - c)[:, :2].T))
+        e_th = np.degrees(np.median(np.abs(angle_diff(m[:, 2], c[:, 2]))))
+        assert abs(e_xy - odo_m) < 0.015 and abs(e_th - odo_deg) < 0.5, (e_xy, e_th)
+
+
+def test_willow_map_and_its_grey_walls(shared_data):
+    y = shared_data / "willow" / "willow-2010-02-18-0.10.yaml"
+    if not y.exists():
+        pytest.skip(f"{y} not found")
+    strict = io.read_map(y)
+    assert strict.shape == (608, 566) and strict.resolution == pytest.approx(0.1)
+    assert np.allclose(strict.origin, 0.0)
+    # map_server semantics: most walls (grey 100-200) are unknown, very few cells occupied
+    assert strict.occupied.sum() < 1000 and strict.unknown.sum() > 200_000
+    walls = io.read_map(y, not_free="occupied")
+    assert not walls.unknown.any() and walls.free.sum() == strict.free.sum()
+    lowered = io.read_map(y, occupied_thresh=0.2)
+    assert lowered.occupied.sum() > 9000  # the grey walls now count as walls
+    # either way a laser cannot cross a wall: unknown cells block rays by default
+    assert np.array_equal(strict.obstacles, walls.obstacles)
+
+
+@pytest.mark.parametrize("name", ["intel", "freiburg-079"])
+def test_built_maps_agree_with_the_scans(logs, built, name):
+    log, grid = logs[name], built[name]
+    # the robot drove through free space
+    assert grid.is_free(log.poses).mean() > 0.97
+    # scan end points (at the corrected poses) lie on or next to occupied cells
+    sub = log.select(slice(0, None, 25))
+    hit = ~sub.no_return & (sub.ranges < 20.0)
+    laser = sub.laser_poses()
+    a = laser[:, 2:3] + sub.angles[None, :]
+    ends = np.stack([laser[:, 0:1] + sub.ranges * np.cos(a), laser[:, 1:2] + sub.ranges * np.sin(a)], -1)[hit]
+    d = grid.distance_at(ends, outside=np.inf)
+    assert np.mean(d <= 0.1) > 0.9
+
+
+def track(log, grid, every=1, n=500, seed=0):
+    sub = log.select(slice(0, None, every))
+    res = cli.localize_log(grid, sub, n_particles=n, rng=np.random.default_rng(seed), init="reference",
+                           beams=60, max_range=30.0, alphas=(0.02, 0.005, 0.01, 0.02), temper=1.0,
+                           min_motion=(0.0, 0.0), sensor_params={"sigma_hit": 0.15})
+    return np.hypot(*(res.estimates[:, :2] - sub.poses[:, :2]).T)
+
+
+def test_tracking_intel(logs, built):
+    err = track(logs["intel"], built["intel"])
+    print(f"\nintel tracking, 910 scans, 500 particles: median {np.median(err):.3f} m, "
+          f"90% {np.percentile(err, 90):.3f} m, max {err.max():.3f} m")
+    assert np.median(err) < 0.15 and np.percentile(err, 90) < 0.3
+
+
+def test_tracking_freiburg(logs, built):
+    """Scans 0-800 (three minutes of driving).
+
+    At scans 837-846 the real odometry reports about 0.9 m forward while the
+    corrected poses move about 0.9 m backward: no odometry noise model explains
+    that, and a tracking filter without recovery loses the robot there (global
+    re-localization, chapter 8, is the cure). The test stops before it.
+    """
+    log = logs["freiburg-079"].select(slice(0, 800))
+    err = track(log, built["freiburg-079"])
+    print(f"\nfreiburg-079 tracking, scans 0-800, 500 particles: median {np.median(err):.3f} m, "
+          f"90% {np.percentile(err, 90):.3f} m, max {err.max():.3f} m")
+    assert np.median(err) < 0.15 and np.percentile(err, 90) < 0.3
+
+
+def test_freiburg_odometry_glitch_is_real(logs):
+    log = logs["freiburg-079"].select(slice(836, 848))
+    m, c = log.motions(), relative(log.poses[:-1], log.poses[1:])
+    assert m[:, 0].sum() > 0.5 and c[:, 0].sum() < -0.5
+
+
+@pytest.mark.parametrize("name, n_scans, within", [("intel", 130, 100), ("freiburg-079", 240, 200)])
+def test_global_localization_converges_in_most_seeds(logs, built, name, n_scans, within):
+    every = EVERY[name]
+    sub = logs[name].select(slice(0, n_scans * every, every))
+    steps = []
+    for seed in range(3):
+        res = cli.localize_log(built[name], sub, n_particles=10000, rng=np.random.default_rng(seed))  # CLI defaults
+        err = np.hypot(*(res.estimates[:, :2] - sub.poses[:, :2]).T)
+        steps.append(cli.converged_at(err, 0.5, hold=20))
+    print(f"\n{name} global localization, 10000 particles, CLI defaults, every {every} scan(s): "
+          f"converged at scans {steps}")
+    ok = [s is not None and s <= within for s in steps]
+    assert sum(ok) >= 2, steps
+
+
+def test_one_command_on_the_intel_log(shared_data, tmp_path):
+    """`localize run --log intel --build-map` end to end (first 150 scans)."""
+    import json
+
+    out = tmp_path / "intel"
+    status = cli.main(["run", "--log", str(carmen(shared_data, "intel")), "--build-map", "--scans", "0:150",
+                       "--particles", "10000", "--seed", "1", "--quiet", "--out", str(out)])
+    assert status == 0
+    s = json.loads((out / "summary.json").read_text())
+    print(f"\nlocalize run on intel scans 0-150: converged at {s['convergence_step_reference']}, "
+          f"median error after {s['median_error_after_convergence_m']} m, {s['real_time_factor']}x real time")
+    assert s["scans"] == 150 and s["real_time_factor"] is not None
+    assert s["convergence_step_reference"] is not None and s["median_error_after_convergence_m"] < 0.5
