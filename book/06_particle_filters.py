@@ -652,8 +652,7 @@ sir_app()
 # For readers of the static book, the widget's default view:
 
 # %%
-fig = sir_figure()
-plt.show()
+sir_figure()
 
 # %% [markdown]
 # ## Summary

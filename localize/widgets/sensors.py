@@ -21,7 +21,7 @@ from ..grid import OccupancyGrid
 from ..sensors import BeamModel
 
 __all__ = ["normalise_weights", "pseudo_density_figure", "beam_density_widget", "pose_scan_figure",
-           "pose_scan_widget"]
+           "pose_scan_widget", "DEMOS", "DEMO_VARIANTS"]
 
 
 def normalise_weights(z_hit: float, z_short: float, z_max: float, z_rand: float) -> tuple[float, float, float, float]:
@@ -183,3 +183,29 @@ def pose_scan_widget(grid: OccupancyGrid, model, angles: ArrayLike, measured: Ar
         theta_deg=w.FloatSlider(value=float(np.degrees(start[2])), min=-180, max=180, step=2,
                                 description="heading [deg]", continuous_update=False),
     )
+
+
+def _pose_scan_demo(dx: float = 0.4):
+    """The pose tool at its default: the office, a true pose, a simulated scan, a displaced guess."""
+    from .. import maps
+
+    grid = maps.office()
+    model = BeamModel(grid, 8.0, z_hit=0.75, z_short=0.1, z_max=0.05, z_rand=0.1, sigma_hit=0.15,
+                      lambda_short=0.5, method="march")
+    angles = np.radians(np.arange(-90.0, 91.0, 6.0))
+    true_pose = np.array([10.0, 5.5, 0.3])
+    measured = model.sample(true_pose[None], angles, np.random.default_rng(5))[0]
+    return pose_scan_figure(grid, model, angles, measured, true_pose[0] + dx, true_pose[1] + 0.2,
+                            float(np.degrees(true_pose[2])), reference_pose=true_pose)
+
+
+#: Zero-argument demos returning each widget's default figure (see tests/test_widgets_common.py).
+DEMOS = {
+    "pseudo_density": lambda: pseudo_density_figure(),
+    "pose_scan": lambda: _pose_scan_demo(),
+}
+#: Other slider positions whose figures must differ from the defaults.
+DEMO_VARIANTS = {
+    "pseudo_density": [lambda: pseudo_density_figure(sigma_hit=0.5), lambda: pseudo_density_figure(z_rand=0.3)],
+    "pose_scan": [lambda: _pose_scan_demo(dx=0.0)],
+}
