@@ -1,0 +1,1151 @@
+"""Monte Carlo Localization: the particle filter on robot poses.
+
+:class:`MCL` carries the belief as ``particles`` (an ``(N, 3)`` array of
+poses) and ``log_weights`` (``(N,)``, normalised so that their log-sum-exp
+is 0). One filter step is the loop of *Probabilistic Robotics* (Thrun,
+Burgard and Fox 2005, table 8.2, "PR" below):
+
+1. :meth:`MCL.predict` -- move every particle with a sample of the motion
+   model (PR table 5.6 for odometry);
+2. :meth:`MCL.update` -- multiply every weight by the measurement likelihood
+   ``p(z | x)`` of the sensor model (added in log space);
+3. :meth:`MCL.resample` -- draw a new, equally weighted set with a resampler
+   from :mod:`localize.resample`, when the effective sample size has fallen
+   below ``resample_threshold * N`` (adaptive resampling);
+4. :meth:`MCL.estimate` -- summarise the belief.
+
+:meth:`MCL.step` does all four. Options turn the basic filter into the
+variants of PR chapter 8: a fixed fraction of random particles injected at
+each resampling (``injection``), augmented MCL with the short- and long-term
+averages ``w_fast`` and ``w_slow`` of the measurement likelihood (``augmented``,
+PR table 8.3) and KLD-sampling, which adapts the number of particles
+(``kld``, Fox 2003, PR table 8.4; see :mod:`localize.kld`).
+
+Weights never become NaN. A likelihood that is NaN or ``+inf`` is counted as
+invalid and treated as zero; if *every* particle ends with zero weight (a scan
+that matches nothing, a sensor model with no random component), the filter
+does not divide by zero: it keeps the particles, discards the measurement (or
+re-draws the particles, see ``on_degenerate``) and says so in
+:attr:`MCL.status`.
+
+The motion model is any callable ``motion(poses, u, rng) -> poses``
+(:class:`OdometryMotion` and :class:`VelocityMotion` wrap
+:mod:`localize.motion`); the sensor model is any object with a method
+``log_likelihood(poses, *z) -> (N,)`` (the range models and the landmark
+model of :mod:`localize.sensors`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import motion as _motion
+from . import resample as _rs
+from .geometry import as_poses, wrap_angle
+from .grid import OccupancyGrid
+from .kld import KLDSampling, kld_sample_size
+
+__all__ = [
+    "MCL",
+    "MCLStatus",
+    "Estimate",
+    "OdometryMotion",
+    "VelocityMotion",
+    "Augmented",
+    "KLDSampling",
+    "gaussian_particles",
+    "uniform_particles",
+    "estimate_pose",
+    "mcl_step_loop",
+    "MCLTrace",
+    "run_mcl",
+]
+
+Motion = Callable[[NDArray[np.float64], Any, np.random.Generator], NDArray[np.float64]]
+Sampler = Callable[[int, np.random.Generator], NDArray[np.float64]]
+
+RESAMPLERS = tuple(_rs.RESAMPLERS)
+
+
+def _check_rng(rng: Any) -> np.random.Generator:
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng must be a numpy.random.Generator, e.g. np.random.default_rng(0); got {type(rng).__name__}")
+    return rng
+
+
+# --------------------------------------------------------------------------- motion adapters
+class OdometryMotion:
+    """The odometry motion model as a particle mover: ``motion(poses, u, rng)``.
+
+    Wraps :func:`localize.motion.sample_odometry`; ``u = (prev_odom, odom)``
+    is the pair of odometry readings (PR table 5.6). ``alphas`` are the four
+    noise parameters of PR, entering as variances
+    ``alpha1*rot1**2 + alpha2*trans**2`` and so on. Keyword options (such as
+    ``min_std``, a floor on the noise that keeps a standing robot's particles
+    from collapsing) go to :func:`~localize.motion.sample_odometry`.
+
+    Examples
+    --------
+    >>> move = OdometryMotion((0.0, 0.0, 0.0, 0.0))          # noise-free
+    >>> p = move(np.zeros((2, 3)), ([0, 0, 0], [1, 0, 0]), np.random.default_rng(0))
+    >>> p.round(6)
+    array([[1., 0., 0.],
+           [1., 0., 0.]])
+    """
+
+    def __init__(self, alphas: ArrayLike = (0.005, 0.005, 0.01, 0.005), **options: Any) -> None:
+        a = np.asarray(alphas, dtype=float)
+        if a.shape != (4,) or np.any(~np.isfinite(a)) or np.any(a < 0):
+            raise ValueError(f"alphas must be four non-negative numbers (alpha1..alpha4 of PR table 5.6); got {alphas!r}")
+        self.alphas = a
+        self.options = options          # passed on: noise=, min_std=, ... (see sample_odometry)
+
+    def __call__(self, poses: NDArray[np.float64], u: Any, rng: np.random.Generator) -> NDArray[np.float64]:
+        return _motion.sample_odometry(poses, u, self.alphas, rng, **self.options)
+
+    def __repr__(self) -> str:
+        return f"OdometryMotion(alphas={tuple(round(float(a), 6) for a in self.alphas)})"
+
+
+class VelocityMotion:
+    """The velocity motion model as a particle mover: ``motion(poses, (v, omega), rng)``.
+
+    Wraps :func:`localize.motion.sample_velocity` with a fixed time step
+    ``dt`` and the six ``alphas`` of PR table 5.3.
+
+    Examples
+    --------
+    >>> VelocityMotion((0.1,) * 6, dt=0.5).dt
+    0.5
+    """
+
+    def __init__(self, alphas: ArrayLike, dt: float, **options: Any) -> None:
+        a = np.asarray(alphas, dtype=float)
+        if a.shape != (6,) or np.any(~np.isfinite(a)) or np.any(a < 0):
+            raise ValueError(f"alphas must be six non-negative numbers (alpha1..alpha6 of PR table 5.3); got {alphas!r}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive time step in seconds; got {dt!r}")
+        self.alphas = a
+        self.dt = float(dt)
+        self.options = options
+
+    def __call__(self, poses: NDArray[np.float64], u: Any, rng: np.random.Generator) -> NDArray[np.float64]:
+        return _motion.sample_velocity(poses, u, self.dt, self.alphas, rng, **self.options)
+
+    def __repr__(self) -> str:
+        return f"VelocityMotion(alphas={tuple(round(float(a), 6) for a in self.alphas)}, dt={self.dt:g})"
+
+
+# --------------------------------------------------------------------------- initialisers
+def uniform_particles(grid: OccupancyGrid, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
+    """``n`` poses drawn uniformly over the known-free cells of ``grid``, headings uniform.
+
+    The prior of global localization: the robot is somewhere in free space,
+    facing anywhere (the initialisation of the seed 001 report).
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> g = office()
+    >>> p = uniform_particles(g, 500, np.random.default_rng(0))
+    >>> p.shape, bool(g.is_free(p).all())
+    ((500, 3), True)
+    """
+    if not isinstance(grid, OccupancyGrid):
+        raise TypeError(f"grid must be an OccupancyGrid; got {type(grid).__name__}")
+    return grid.sample_free(_check_n(n), _check_rng(rng))
+
+
+def gaussian_particles(
+    mean: ArrayLike, cov: ArrayLike, n: int, rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """``n`` poses from a Gaussian around ``mean`` (the prior of pose tracking).
+
+    ``cov`` is a ``(3, 3)`` covariance or three standard deviations
+    ``(sx, sy, stheta)``. Headings are wrapped to ``[-pi, pi)``.
+
+    Examples
+    --------
+    >>> p = gaussian_particles([1.0, 2.0, 3.1], (0.1, 0.1, 0.1), 20_000, np.random.default_rng(0))
+    >>> p[:, :2].mean(axis=0).round(2), bool(np.all(p[:, 2] < np.pi))
+    (array([1., 2.]), True)
+    """
+    m = as_poses(mean, "mean").reshape(3)
+    c = np.asarray(cov, dtype=float)
+    if c.shape == (3,):
+        if np.any(c < 0):
+            raise ValueError(f"cov given as standard deviations must be >= 0; got {cov!r}")
+        c = np.diag(c**2)
+    if c.shape != (3, 3) or np.any(~np.isfinite(c)):
+        raise ValueError(f"cov must be a finite (3, 3) covariance or three standard deviations; got shape {c.shape}")
+    if not np.allclose(c, c.T):
+        raise ValueError("cov must be symmetric")
+    if np.linalg.eigvalsh(c).min() < -1e-12:
+        raise ValueError("cov must be positive semi-definite")
+    p = _check_rng(rng).multivariate_normal(m, c, size=_check_n(n), method="eigh")
+    p[:, 2] = wrap_angle(p[:, 2])
+    return p
+
+
+def _check_n(n: Any) -> int:
+    try:
+        k = int(n)
+    except (TypeError, ValueError):
+        raise TypeError(f"n must be an integer number of particles; got {n!r}") from None
+    if k != n or k < 1:
+        raise ValueError(f"n must be a whole number of particles >= 1; got {n!r}")
+    return k
+
+
+# --------------------------------------------------------------------------- estimate
+@dataclass(frozen=True)
+class Estimate:
+    """A summary of the particle belief.
+
+    Attributes
+    ----------
+    pose : ndarray (3,)
+        The answer to "where is the robot?": the weighted mean of the heaviest
+        cluster (equal to ``mean`` when the belief has one mode).
+    mean : ndarray (3,)
+        Weighted mean of all particles; circular mean for the heading.
+        Meaningless when the belief is multimodal (it may lie in a wall
+        between two hypotheses) -- use ``pose``.
+    std : ndarray (3,)
+        Weighted spread of all particles: standard deviations in x and y
+        (metres) and the circular standard deviation of the heading (rad).
+    cov : ndarray (3, 3)
+        Weighted covariance, heading deviations taken about the circular mean.
+    best_weight : float
+        Share of the total weight held by the heaviest cluster, in (0, 1].
+    n_clusters : int
+        Number of clusters holding at least 1% of the weight.
+    n_eff : float
+        Effective sample size ``1 / sum(w**2)``.
+
+    Examples
+    --------
+    >>> e = estimate_pose([[1.0, 2.0, 3.1], [1.2, 2.0, -3.1]])
+    >>> e.pose.round(2), e.multimodal
+    (array([ 1.1 ,  2.  , -3.14]), False)
+    """
+
+    pose: NDArray[np.float64]
+    mean: NDArray[np.float64]
+    std: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    best_weight: float
+    n_clusters: int
+    n_eff: float
+
+    @property
+    def multimodal(self) -> bool:
+        """True when more than one cluster holds a noticeable share of the weight."""
+        return self.n_clusters > 1
+
+
+def _weighted_stats(p: NDArray, w: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """Weighted mean (circular heading), covariance and spread; ``w`` sums to one."""
+    s = float(w @ np.sin(p[:, 2]))
+    c = float(w @ np.cos(p[:, 2]))
+    th = float(wrap_angle(np.arctan2(s, c)))
+    xy = w @ p[:, :2]
+    mean = np.array([xy[0], xy[1], th])
+    d = p - mean
+    d[:, 2] = wrap_angle(d[:, 2])
+    cov = (d * w[:, None]).T @ d
+    r = min(max(np.hypot(s, c), 1e-300), 1.0)
+    std = np.array([np.sqrt(max(cov[0, 0], 0.0)), np.sqrt(max(cov[1, 1], 0.0)), np.sqrt(-2.0 * np.log(r))])
+    return mean, cov, std
+
+
+def estimate_pose(
+    particles: ArrayLike,
+    weights: ArrayLike | None = None,
+    cluster_size: float = 0.5,
+    min_share: float = 0.01,
+    mass: float = 0.9,
+) -> Estimate:
+    """Summarise a weighted particle set: mean, spread and the best cluster.
+
+    Clusters are found on a 2-D histogram of the particle weights with cells
+    of side ``cluster_size`` (metres). The heaviest cells that together hold
+    ``mass`` of the weight are kept (so that a thin veil of unlikely particles
+    spread over the whole map does not join every hypothesis into one), and
+    kept cells that touch (8-neighbourhood) form one cluster. The heaviest
+    cluster's weighted mean is the pose estimate. Clusters holding less than
+    ``min_share`` of the weight are not counted in ``n_clusters``.
+
+    Parameters
+    ----------
+    particles : array_like (N, 3)
+    weights : array_like (N,), optional
+        Non-negative weights (normalised here); uniform if omitted.
+    cluster_size : float
+        Histogram cell side in metres, > 0.
+    min_share : float
+        Smallest weight share for a cluster to count, in [0, 1).
+    mass : float
+        Share of the weight the clustered cells must cover, in (0, 1].
+
+    Examples
+    --------
+    Two equally likely hypotheses 10 m apart, one with a little more weight:
+
+    >>> rng = np.random.default_rng(0)
+    >>> a = rng.normal([2, 2, 0.3], 0.1, size=(600, 3))
+    >>> b = rng.normal([12, 2, 1.6], 0.1, size=(400, 3))
+    >>> e = estimate_pose(np.vstack([a, b]))
+    >>> e.n_clusters, round(e.best_weight, 2), e.pose.round(1)
+    (2, 0.6, array([2. , 2. , 0.3]))
+    >>> e.mean[:2].round(1)                     # the mean lies between them, in no cluster
+    array([6., 2.])
+    """
+    p = as_poses(particles, "particles")
+    if p.ndim != 2 or p.shape[0] == 0:
+        raise ValueError(f"particles must be a non-empty (N, 3) array; got shape {p.shape}")
+    n = p.shape[0]
+    if weights is None:
+        w = np.full(n, 1.0 / n)
+    else:
+        w = np.asarray(weights, dtype=float)
+        if w.shape != (n,):
+            raise ValueError(f"weights must have shape ({n},); got {w.shape}")
+        if np.any(~np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+            raise ValueError("weights must be finite, non-negative and not all zero")
+        w = w / w.sum()
+    if not (np.isfinite(cluster_size) and cluster_size > 0):
+        raise ValueError(f"cluster_size must be a positive length in metres; got {cluster_size!r}")
+    if not 0.0 <= min_share < 1.0:
+        raise ValueError(f"min_share must lie in [0, 1); got {min_share!r}")
+    if not 0.0 < mass <= 1.0:
+        raise ValueError(f"mass must lie in (0, 1]; got {mass!r}")
+    return _estimate(p, w, cluster_size, min_share, mass)
+
+
+def _estimate(p: NDArray, w: NDArray, cluster_size: float, min_share: float, mass: float) -> Estimate:
+    """:func:`estimate_pose` without input checks (``w`` normalised): the filter's fast path."""
+    mean, cov, std = _weighted_stats(p, w)
+    n_eff = float(1.0 / (w @ w))
+
+    labels, n_lab = _cluster_labels(p[:, :2], w, cluster_size, mass)
+    if n_lab <= 1:
+        return Estimate(mean.copy(), mean, std, cov, 1.0, 1, n_eff)
+    inside = labels >= 0
+    share = np.bincount(labels[inside], weights=w[inside], minlength=n_lab)
+    best = int(np.argmax(share))
+    sel = labels == best
+    wb = w[sel] / share[best]
+    pose, _, _ = _weighted_stats(p[sel], wb)
+    n_clusters = int(np.count_nonzero(share >= max(min_share, 1e-12)))
+    return Estimate(pose, mean, std, cov, float(share[best]), max(n_clusters, 1), n_eff)
+
+
+def _cluster_labels(xy: NDArray, w: NDArray, size: float, mass: float) -> tuple[NDArray[np.int64], int]:
+    """Cluster label (0..K-1, or -1 outside every cluster) of each weighted point.
+
+    The points are binned into square cells of side ``size``; the heaviest
+    cells holding together ``mass`` of the weight are kept, and kept cells
+    that touch (8-neighbourhood) form one cluster.
+    """
+    from scipy.ndimage import label
+
+    lo = xy.min(axis=0)
+    span = xy.max(axis=0) - lo
+    # keep the histogram small: at most ~512 cells along each side
+    size = max(size, float(span.max()) / 512.0)
+    ij = np.floor((xy - lo) / size).astype(np.int64)
+    shape = tuple(int(v) + 1 for v in ij.max(axis=0))
+    flat = ij[:, 0] * shape[1] + ij[:, 1]
+    cell_w = np.bincount(flat, weights=w, minlength=shape[0] * shape[1])
+    order = np.argsort(cell_w)[::-1]
+    k = int(np.searchsorted(np.cumsum(cell_w[order]), mass * cell_w.sum())) + 1
+    keep = np.zeros(cell_w.size, dtype=bool)
+    keep[order[:k]] = True
+    keep &= cell_w > 0
+    lab, n = label(keep.reshape(shape), structure=np.ones((3, 3), dtype=bool))
+    return lab.reshape(-1)[flat] - 1, int(n)
+
+
+# --------------------------------------------------------------------------- status
+@dataclass
+class MCLStatus:
+    """What the filter did in its last step, and running counters.
+
+    Attributes
+    ----------
+    n_particles : int
+        Current number of particles.
+    n_eff : float
+        Effective sample size after the last update.
+    resampled : bool
+        Whether the last step resampled.
+    n_injected : int
+        Random particles injected at the last resampling.
+    p_inject : float
+        Augmented MCL's injection probability ``max(0, 1 - w_fast / w_slow)``.
+    log_evidence : float
+        ``log sum_i W_i p(z | x_i)``: the log of the average measurement
+        likelihood under the predicted belief (PR's ``w_avg``); ``-inf``
+        when the measurement matched no particle.
+    n_invalid : int
+        Particles whose likelihood was NaN or +inf in the last update
+        (treated as zero).
+    degenerate : bool
+        True when the last update left every particle with zero weight and
+        the filter had to recover.
+    n_degenerate : int
+        How many updates so far needed that recovery.
+    message : str
+        A readable account of the last step's special events ("" if none).
+
+    Examples
+    --------
+    >>> MCLStatus(n_particles=100, n_eff=100.0)
+    MCLStatus(n_particles=100, n_eff=100.0, resampled=False, n_injected=0, p_inject=0.0, log_evidence=0.0, n_invalid=0, degenerate=False, n_degenerate=0, message='')
+    """
+
+    n_particles: int = 0
+    n_eff: float = 0.0
+    resampled: bool = False
+    n_injected: int = 0
+    p_inject: float = 0.0
+    log_evidence: float = 0.0
+    n_invalid: int = 0
+    degenerate: bool = False
+    n_degenerate: int = 0
+    message: str = ""
+    log_w_slow: float = field(default=-np.inf, repr=False)
+    log_w_fast: float = field(default=-np.inf, repr=False)
+
+
+@dataclass(frozen=True)
+class Augmented:
+    """Settings of augmented MCL (PR table 8.3).
+
+    ``w_slow`` and ``w_fast`` are exponential moving averages of the average
+    measurement likelihood ``w_avg`` with rates ``alpha_slow << alpha_fast``.
+    When the short-term average drops below the long-term one -- the scans
+    suddenly fit the particles much worse than they used to -- random
+    particles are injected with probability ``max(0, 1 - w_fast / w_slow)``.
+
+    PR starts both averages at 0, which leaves the filter unable to notice a
+    failure until ``w_slow`` has grown -- for about ``1 / alpha_slow`` steps;
+    here both start at the first ``w_avg`` instead.
+
+    ``temperature`` divides the log-likelihoods before they enter the two
+    averages (1 = PR's rule). A 60-beam scan's likelihood swings by many
+    orders of magnitude from step to step, which makes the ratio jumpy; a
+    temperature equal to the number of beams averages per beam instead.
+
+    Examples
+    --------
+    >>> Augmented(alpha_slow=0.01, alpha_fast=0.2)
+    Augmented(alpha_slow=0.01, alpha_fast=0.2, temperature=1.0)
+    """
+
+    alpha_slow: float = 0.01
+    alpha_fast: float = 0.2
+    temperature: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.alpha_slow < 1.0:
+            raise ValueError(f"alpha_slow must lie in (0, 1); got {self.alpha_slow!r}")
+        if not self.alpha_slow < self.alpha_fast < 1.0:
+            raise ValueError(
+                f"alpha_fast must lie in (alpha_slow, 1) = ({self.alpha_slow}, 1); got {self.alpha_fast!r}"
+            )
+        if not (np.isfinite(self.temperature) and self.temperature > 0):
+            raise ValueError(f"temperature must be a positive number; got {self.temperature!r}")
+
+
+# --------------------------------------------------------------------------- the filter
+class MCL:
+    """Monte Carlo Localization: a particle filter over poses ``(x, y, theta)``.
+
+    Parameters
+    ----------
+    particles : array_like (N, 3)
+        The initial particle set (see :meth:`uniform` and :meth:`gaussian`).
+    motion : callable or array_like of 4 floats
+        ``motion(poses, u, rng) -> poses``; four numbers are taken as the
+        ``alphas`` of the odometry model (:class:`OdometryMotion`).
+    sensor : object
+        Has ``log_likelihood(poses, *z) -> (N,)``; :meth:`update` passes its
+        arguments through (``ranges, angles`` for the range models,
+        ``z, ids`` for the landmark model).
+    rng : numpy.random.Generator
+        The filter's only source of randomness.
+    log_weights : array_like (N,), optional
+        Initial log-weights (uniform if omitted); normalised here.
+    resampler : {"systematic", "stratified", "residual", "multinomial"} or callable
+        A resampler of :mod:`localize.resample` or ``f(weights, rng) -> indices``.
+    resample_threshold : float
+        Resample when ``N_eff < resample_threshold * N``, in [0, 1]. 1 resamples
+        at every step (the textbook loop), 0 never resamples on its own.
+    injection : float
+        Fraction of particles replaced by random ones at each resampling, in
+        [0, 1) (the fixed 5% of the seed 003 tutorial is 0.05).
+    augmented : Augmented or (alpha_slow, alpha_fast) or None
+        Augmented MCL (PR table 8.3): inject with probability
+        ``max(0, 1 - w_fast / w_slow)``. Resampling is forced whenever that
+        probability is positive.
+    kld : KLDSampling or None
+        Adapt the number of particles at each resampling (Fox 2003).
+    sampler : callable, optional
+        ``sampler(n, rng) -> (n, 3)`` draws random particles for injection
+        and recovery. Defaults to uniform over the free cells of ``grid``.
+    grid : OccupancyGrid, optional
+        The map: the default ``sampler`` and, with ``free_space_only``, the
+        set of allowed positions.
+    free_space_only : bool
+        Give zero weight to particles outside the known-free cells of ``grid``
+        (robots cannot stand in walls).
+    on_degenerate : {"keep", "reinitialize"}
+        What to do when an update leaves every particle with zero weight:
+        keep the particles and previous weights, ignoring the measurement
+        (default), or re-draw all particles with ``sampler``.
+
+    Examples
+    --------
+    A one-dimensional toy: a sensor that measures x with 0.2 m noise, a robot
+    that does not move, particles spread over [0, 10] m.
+
+    >>> class GPS:
+    ...     def log_likelihood(self, poses, z):
+    ...         return -0.5 * ((poses[:, 0] - z) / 0.2) ** 2
+    >>> still = lambda poses, u, rng: poses
+    >>> rng = np.random.default_rng(0)
+    >>> p0 = np.column_stack([rng.uniform(0, 10, 2000), np.full(2000, 5.0), np.zeros(2000)])
+    >>> f = MCL(p0, still, GPS(), rng=rng)
+    >>> for _ in range(5):
+    ...     e = f.step(None, 3.0)
+    >>> round(float(e.pose[0]), 1), round(float(e.std[0]), 2)
+    (3.0, 0.09)
+    """
+
+    def __init__(
+        self,
+        particles: ArrayLike,
+        motion: Motion | ArrayLike,
+        sensor: Any,
+        *,
+        rng: np.random.Generator,
+        log_weights: ArrayLike | None = None,
+        resampler: str | Callable[[NDArray, np.random.Generator], NDArray] = "systematic",
+        resample_threshold: float = 0.5,
+        injection: float = 0.0,
+        augmented: Augmented | tuple[float, float] | None = None,
+        kld: KLDSampling | None = None,
+        sampler: Sampler | None = None,
+        grid: OccupancyGrid | None = None,
+        free_space_only: bool = False,
+        on_degenerate: str = "keep",
+    ) -> None:
+        self.rng = _check_rng(rng)
+        p = as_poses(particles, "particles")
+        if p.ndim != 2 or p.shape[0] < 1:
+            raise ValueError(f"particles must be an (N, 3) array with N >= 1; got shape {p.shape}")
+        self.particles = np.array(p, dtype=float)
+        self.particles[:, 2] = wrap_angle(self.particles[:, 2])
+        n = self.particles.shape[0]
+        if log_weights is None:
+            self.log_weights = np.full(n, -np.log(n))
+        else:
+            lw = np.asarray(log_weights, dtype=float)
+            if lw.shape != (n,):
+                raise ValueError(f"log_weights must have shape ({n},) like the particles; got {lw.shape}")
+            if np.any(np.isnan(lw)) or np.any(lw == np.inf):
+                raise ValueError("log_weights must not contain NaN or +inf")
+            norm = _rs.logsumexp(lw)
+            if not np.isfinite(norm):
+                raise ValueError("log_weights are -inf everywhere; at least one particle needs a positive weight")
+            self.log_weights = lw - norm
+
+        if callable(motion):
+            self.motion = motion
+        else:
+            self.motion = OdometryMotion(motion)
+        if not callable(getattr(sensor, "log_likelihood", None)):
+            raise TypeError(
+                "sensor must have a method log_likelihood(poses, *z) -> (N,) "
+                f"(e.g. localize.sensors.BeamModel); got {type(sensor).__name__}"
+            )
+        self.sensor = sensor
+        self.resampler_name, self._resample_fn = _get_resampler(resampler)
+        thr = float(resample_threshold)
+        if not 0.0 <= thr <= 1.0:
+            raise ValueError(f"resample_threshold must lie in [0, 1] (a fraction of N); got {resample_threshold!r}")
+        self.resample_threshold = thr
+        inj = float(injection)
+        if not 0.0 <= inj < 1.0:
+            raise ValueError(f"injection must be a fraction in [0, 1); got {injection!r}")
+        self.injection = inj
+        if augmented is not None and not isinstance(augmented, Augmented):
+            try:
+                augmented = Augmented(*augmented)
+            except TypeError:
+                raise TypeError(
+                    f"augmented must be an Augmented(...) or a pair (alpha_slow, alpha_fast); got {augmented!r}"
+                ) from None
+        self.augmented = augmented
+        if kld is not None and not isinstance(kld, KLDSampling):
+            raise TypeError(f"kld must be a localize.kld.KLDSampling or None; got {type(kld).__name__}")
+        self.kld = kld
+        if grid is not None and not isinstance(grid, OccupancyGrid):
+            raise TypeError(f"grid must be an OccupancyGrid or None; got {type(grid).__name__}")
+        self.grid = grid
+        if sampler is None and grid is not None:
+            sampler = grid.sample_free
+        self.sampler = sampler
+        if on_degenerate not in ("keep", "reinitialize"):
+            raise ValueError(f"on_degenerate must be 'keep' or 'reinitialize'; got {on_degenerate!r}")
+        self.on_degenerate = on_degenerate
+        if sampler is None and (inj > 0 or augmented is not None or on_degenerate == "reinitialize"):
+            raise ValueError(
+                "random injection, augmented MCL and on_degenerate='reinitialize' need random particles: "
+                "pass grid=... (uniform over free cells) or sampler=f(n, rng)"
+            )
+        if free_space_only and grid is None:
+            raise ValueError("free_space_only=True needs the map: pass grid=...")
+        self.free_space_only = bool(free_space_only)
+        if self.free_space_only:
+            self._free = np.ascontiguousarray(grid.free)
+        self.status = MCLStatus(n_particles=n, n_eff=self.n_eff)
+
+    # ------------------------------------------------------------ constructors
+    @classmethod
+    def uniform(
+        cls,
+        grid: OccupancyGrid,
+        n: int,
+        motion: Motion | ArrayLike,
+        sensor: Any,
+        *,
+        rng: np.random.Generator,
+        **options: Any,
+    ) -> "MCL":
+        """Global localization: ``n`` particles uniform over the free cells of ``grid``.
+
+        ``grid`` is also passed on as the filter's map (random injection and
+        recovery draw from its free space). Other options as in :class:`MCL`.
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> class Flat:
+        ...     def log_likelihood(self, poses, *z):
+        ...         return np.zeros(len(poses))
+        >>> f = MCL.uniform(office(), 1000, (0.01,) * 4, Flat(), rng=np.random.default_rng(0))
+        >>> f.n, round(f.status.n_eff)
+        (1000, 1000)
+        """
+        rng = _check_rng(rng)
+        options.setdefault("grid", grid)
+        return cls(uniform_particles(grid, n, rng), motion, sensor, rng=rng, **options)
+
+    @classmethod
+    def gaussian(
+        cls,
+        mean: ArrayLike,
+        cov: ArrayLike,
+        n: int,
+        motion: Motion | ArrayLike,
+        sensor: Any,
+        *,
+        rng: np.random.Generator,
+        **options: Any,
+    ) -> "MCL":
+        """Pose tracking: ``n`` particles from a Gaussian around a known start pose.
+
+        ``cov`` is a (3, 3) covariance or three standard deviations.
+
+        Examples
+        --------
+        >>> class Flat:
+        ...     def log_likelihood(self, poses, *z):
+        ...         return np.zeros(len(poses))
+        >>> f = MCL.gaussian([1, 2, 0.5], (0.1, 0.1, 0.05), 500, (0.01,) * 4, Flat(), rng=np.random.default_rng(0))
+        >>> f.estimate().pose.round(1)
+        array([1. , 2. , 0.5])
+        """
+        rng = _check_rng(rng)
+        return cls(gaussian_particles(mean, cov, n, rng), motion, sensor, rng=rng, **options)
+
+    # ------------------------------------------------------------ properties
+    @property
+    def n(self) -> int:
+        """Current number of particles."""
+        return int(self.particles.shape[0])
+
+    @property
+    def weights(self) -> NDArray[np.float64]:
+        """Normalised weights ``exp(log_weights)`` (they sum to 1)."""
+        return np.exp(self.log_weights)
+
+    @property
+    def n_eff(self) -> float:
+        """Effective sample size ``1 / sum(w**2)``, in [1, N]."""
+        return float(np.exp(-_rs.logsumexp(2.0 * self.log_weights)))
+
+    # ------------------------------------------------------------ the loop
+    def predict(self, u: Any) -> None:
+        """Move every particle by a sample of the motion model given control ``u``.
+
+        For the odometry model ``u = (prev_odom, odom)``. Weights are
+        unchanged (PR table 8.2 line 4).
+
+        Examples
+        --------
+        >>> class GPS:                     # measures x with 0.5 m noise
+        ...     def log_likelihood(self, poses, z):
+        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
+        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
+        >>> rng = np.random.default_rng(0)
+        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f.predict(1.0)
+        >>> float(f.particles[0, 0]), float(f.particles[-1, 0])
+        (1.0, 11.0)
+        """
+        new = self.motion(self.particles, u, self.rng)
+        new = np.asarray(new, dtype=float)
+        if new.shape != self.particles.shape:
+            raise ValueError(
+                f"the motion model returned shape {new.shape}; expected {self.particles.shape} like the particles"
+            )
+        self.particles = new
+
+    def update(self, *z: Any, **kwargs: Any) -> None:
+        """Weight the particles by the measurement: ``log w += log p(z | x)``.
+
+        Arguments go to ``sensor.log_likelihood(particles, *z, **kwargs)``.
+        NaN or +inf likelihoods count as invalid (zero weight, reported in
+        ``status.n_invalid``). If no particle keeps a positive weight the
+        filter recovers as ``on_degenerate`` says and sets
+        ``status.degenerate``.
+
+        Examples
+        --------
+        >>> class GPS:                     # measures x with 0.5 m noise
+        ...     def log_likelihood(self, poses, z):
+        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
+        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
+        >>> rng = np.random.default_rng(0)
+        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f.update(3.0)
+        >>> int(np.argmax(f.weights)), round(float(f.weights.sum()), 6), round(f.status.n_eff, 1)
+        (30, 1.0, 17.7)
+        >>> f.update(1e6)                  # absurd, but in log space the weights stay finite
+        >>> f.status.degenerate
+        False
+        >>> f.update(np.inf)               # likelihood exactly zero for every particle
+        >>> f.status.degenerate, f.status.message
+        (True, 'every particle got zero likelihood: measurement ignored, weights kept')
+        """
+        st = self.status
+        # log(0) = -inf and 0/0 = NaN inside a sensor model are handled below (and reported in the
+        # status), so their floating-point warnings are silenced here
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ll = np.asarray(self.sensor.log_likelihood(self.particles, *z, **kwargs), dtype=float)
+        n = self.n
+        if ll.shape != (n,):
+            raise ValueError(f"sensor.log_likelihood returned shape {ll.shape}; expected ({n},), one per particle")
+        bad = np.isnan(ll) | (ll == np.inf)
+        n_bad = int(np.count_nonzero(bad))
+        if n_bad:
+            ll = np.where(bad, -np.inf, ll)
+        if self.free_space_only:
+            ll = np.where(self._in_free_space(self.particles), ll, -np.inf)
+        lw = self.log_weights + ll
+        # log-sum-exp by hand: the shifted exponentials also give N_eff without a second pass
+        top = float(lw.max())
+        if np.isfinite(top):
+            e = np.exp(lw - top)
+            total = float(e.sum())
+            lnorm = top + float(np.log(total))
+        else:
+            lnorm = -np.inf
+        st.n_invalid = n_bad
+        st.log_evidence = lnorm
+        st.message = f"{n_bad} invalid likelihood(s) treated as zero" if n_bad else ""
+        if not np.isfinite(lnorm):
+            st.degenerate = True
+            st.n_degenerate += 1
+            if self.on_degenerate == "reinitialize":
+                self.particles = self.sampler(n, self.rng)
+                self.log_weights = np.full(n, -np.log(n))
+                what = "particles re-drawn from the sampler"
+            else:
+                what = "measurement ignored, weights kept"
+            st.message = (st.message + "; " if st.message else "") + (
+                f"every particle got zero likelihood: {what}"
+            )
+            st.n_eff = self.n_eff
+        else:
+            st.degenerate = False
+            lw -= lnorm
+            self.log_weights = lw
+            if self.augmented is not None:
+                self._update_averages(lnorm)
+            st.n_eff = total * total / float(e @ e)
+
+    def _update_averages(self, log_w_avg: float) -> None:
+        a = self.augmented
+        st = self.status
+        lw = log_w_avg / a.temperature
+        if st.log_w_slow == -np.inf:          # first measurement: start both averages at w_avg
+            st.log_w_slow = st.log_w_fast = lw
+        st.log_w_slow = _ema_log(st.log_w_slow, lw, a.alpha_slow)
+        st.log_w_fast = _ema_log(st.log_w_fast, lw, a.alpha_fast)
+        p = float(-np.expm1(st.log_w_fast - st.log_w_slow))
+        st.p_inject = p if p > 1e-9 else 0.0       # ignore rounding noise of equal averages
+
+    def needs_resampling(self) -> bool:
+        """The resampling policy: ``N_eff < threshold * N``, or injection is due.
+
+        With ``resample_threshold = 1`` every step resamples; augmented MCL
+        forces a resampling whenever its injection probability is positive.
+
+        Examples
+        --------
+        >>> class GPS:                     # measures x with 0.5 m noise
+        ...     def log_likelihood(self, poses, z):
+        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
+        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
+        >>> rng = np.random.default_rng(0)
+        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f.needs_resampling()           # equal weights: N_eff = N
+        False
+        >>> f.update(3.0)
+        >>> f.needs_resampling()           # N_eff = 17.7 < 0.5 * 101
+        True
+        """
+        if self.augmented is not None and self.status.p_inject > 0:
+            return True
+        if self.resample_threshold >= 1.0:
+            return True
+        return self.n_eff < self.resample_threshold * self.n
+
+    def resample(self) -> None:
+        """Draw a new, equally weighted particle set (always; see :meth:`needs_resampling`).
+
+        With KLD-sampling the new set's size is chosen by the KLD bound; then
+        random particles replace ``injection * N`` of the new set (rounded)
+        or, with augmented MCL, each particle with probability ``p_inject``
+        -- whichever replaces more.
+
+        Examples
+        --------
+        >>> class GPS:                     # measures x with 0.5 m noise
+        ...     def log_likelihood(self, poses, z):
+        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
+        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
+        >>> rng = np.random.default_rng(0)
+        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f.update(3.0)
+        >>> f.resample()
+        >>> bool(np.all(np.abs(f.particles[:, 0] - 3.0) < 2.0)), round(f.n_eff)
+        (True, 101)
+        """
+        st = self.status
+        w = self.weights
+        if self.kld is None:
+            idx = np.asarray(self._resample_fn(w, self.rng))
+            if idx.shape != (self.n,):
+                raise ValueError(f"the resampler returned shape {idx.shape}; expected ({self.n},)")
+            new = self.particles[idx]
+        else:
+            # n_max i.i.d. draws in random order: every prefix is an i.i.d. sample (PR table 8.4)
+            draws = _rs.multinomial(w, self.rng, n=self.kld.n_max)
+            cand = self.particles[self.rng.permutation(draws)]
+            m = kld_sample_size(cand, self.kld.bin_size, self.kld.epsilon, self.kld.delta, self.kld.n_min)
+            new = cand[:m]
+        n = new.shape[0]
+        n_inj = int(round(self.injection * n))
+        if self.augmented is not None and st.p_inject > 0:
+            n_inj = max(n_inj, int(self.rng.binomial(n, st.p_inject)))
+        if n_inj > 0:
+            where = self.rng.choice(n, size=n_inj, replace=False) if n_inj < n else np.arange(n)
+            new = new.copy() if new.base is not None else new
+            new[where] = np.asarray(self.sampler(n_inj, self.rng), dtype=float)
+        self.particles = new
+        self.log_weights = np.full(n, -np.log(n))
+        st.n_injected = n_inj
+        st.resampled = True
+        st.n_particles = n
+        st.n_eff = float(n)
+
+    def estimate(self, cluster_size: float = 0.5, min_share: float = 0.01, mass: float = 0.9) -> Estimate:
+        """Summarise the belief (see :func:`estimate_pose`, whose checks it skips: the filter's own
+        particles and normalised weights are valid by construction).
+
+        Examples
+        --------
+        >>> class GPS:                     # measures x with 0.5 m noise
+        ...     def log_likelihood(self, poses, z):
+        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
+        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
+        >>> rng = np.random.default_rng(0)
+        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f.update(3.0)
+        >>> e = f.estimate()
+        >>> round(float(e.pose[0]), 1), round(float(e.std[0]), 2), e.n_clusters
+        (3.0, 0.5, 1)
+        """
+        if not (np.isfinite(cluster_size) and cluster_size > 0):
+            raise ValueError(f"cluster_size must be a positive length in metres; got {cluster_size!r}")
+        w = self.weights
+        return _estimate(self.particles, w / w.sum(), float(cluster_size), float(min_share), float(mass))
+
+    def step(self, u: Any, *z: Any, **kwargs: Any) -> Estimate:
+        """One full filter step: predict, update, estimate, resample if the policy says so.
+
+        ``u`` is the control (``None`` skips the prediction), ``z`` the
+        measurement arguments for the sensor model (none skips the update).
+        The estimate is taken from the weighted set *before* resampling,
+        which adds no resampling noise to it. Returns that estimate.
+
+        Examples
+        --------
+        >>> class GPS:                     # measures x with 0.5 m noise
+        ...     def log_likelihood(self, poses, z):
+        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
+        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
+        >>> rng = np.random.default_rng(0)
+        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> e = f.step(0.5, 3.0)          # move 0.5 m, then measure x = 3
+        >>> round(float(e.pose[0]), 1), f.status.resampled
+        (3.0, True)
+        """
+        st = self.status
+        st.resampled = False
+        st.n_injected = 0
+        if u is not None:
+            self.predict(u)
+        if z:
+            self.update(*z, **kwargs)
+        est = self.estimate()
+        if self.needs_resampling():
+            self.resample()
+        st.n_particles = self.n
+        return est
+
+    def _in_free_space(self, poses: NDArray) -> NDArray[np.bool_]:
+        g = self.grid
+        rel = (poses[:, :2] - g.origin) / g.resolution
+        j = np.floor(rel[:, 0]).astype(np.int64)
+        i = np.floor(rel[:, 1]).astype(np.int64)
+        h, w = self._free.shape
+        ok = (i >= 0) & (i < h) & (j >= 0) & (j < w)
+        out = np.zeros(poses.shape[0], dtype=bool)
+        out[ok] = self._free[i[ok], j[ok]]
+        return out
+
+    def __repr__(self) -> str:
+        opts = [f"n={self.n}", f"resampler={self.resampler_name!r}", f"threshold={self.resample_threshold:g}"]
+        if self.injection:
+            opts.append(f"injection={self.injection:g}")
+        if self.augmented is not None:
+            opts.append(f"augmented=({self.augmented.alpha_slow:g}, {self.augmented.alpha_fast:g})")
+        if self.kld is not None:
+            opts.append(f"kld=(eps={self.kld.epsilon:g}, delta={self.kld.delta:g})")
+        return "MCL(" + ", ".join(opts) + ")"
+
+
+# --------------------------------------------------------------------------- running a log
+@dataclass(frozen=True, eq=False)
+class MCLTrace:
+    """What a filter did over a run, one row per step (see :func:`run_mcl`).
+
+    Attributes
+    ----------
+    poses : ndarray (T, 3)
+        The estimate (``Estimate.pose``: mean of the best cluster) at each step.
+    means, stds : ndarray (T, 3)
+        Weighted mean and spread of all particles.
+    best_weight : ndarray (T,)
+        Weight share of the best cluster.
+    n_particles : ndarray (T,) of int
+        Particles used in the step's update (changes with KLD-sampling).
+    n_eff : ndarray (T,)
+        Effective sample size after the update.
+    resampled, degenerate : ndarray (T,) of bool
+    n_injected : ndarray (T,) of int
+    p_inject : ndarray (T,)
+    beam_evaluations : int
+        Total particle x beam likelihood evaluations: the run's work, a
+        machine-independent measure of its cost.
+    snapshots : dict[int, tuple[ndarray, ndarray]]
+        ``step -> (particles, weights)`` after the update of that step,
+        for the steps asked for.
+
+    Examples
+    --------
+    See :func:`run_mcl`, which makes them.
+    """
+
+    poses: NDArray[np.float64]
+    means: NDArray[np.float64]
+    stds: NDArray[np.float64]
+    best_weight: NDArray[np.float64]
+    n_particles: NDArray[np.int64]
+    n_eff: NDArray[np.float64]
+    resampled: NDArray[np.bool_]
+    degenerate: NDArray[np.bool_]
+    n_injected: NDArray[np.int64]
+    p_inject: NDArray[np.float64]
+    beam_evaluations: int
+    snapshots: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.poses.shape[0])
+
+
+def run_mcl(
+    mcl: "MCL",
+    run: Any,
+    snapshot_steps: Any = (),
+    n_steps: int | None = None,
+) -> MCLTrace:
+    """Run a filter over a recorded (or simulated) range run and record what it did.
+
+    ``run`` is anything with ``ranges (T, B)``, ``angles (B,)`` and
+    ``control(k)`` giving the motion into step ``k`` -- a
+    :class:`localize.sim.RangeRun`, for instance. Step 0 is a measurement
+    only; step ``k >= 1`` is ``mcl.step(run.control(k), run.ranges[k], run.angles)``.
+
+    Parameters
+    ----------
+    mcl : MCL
+        The filter, already initialised (it is advanced in place).
+    run : object
+        The data, see above.
+    snapshot_steps : iterable of int
+        Steps whose weighted particle set (after the update) is kept.
+    n_steps : int, optional
+        Stop after this many steps (default: the whole run).
+
+    Examples
+    --------
+    >>> class Run:                                # a robot standing still, measured by a "GPS"
+    ...     ranges = np.full((4, 1), 3.0)
+    ...     angles = np.zeros(1)
+    ...     def control(self, k):
+    ...         return None
+    >>> class GPS:
+    ...     def log_likelihood(self, poses, ranges, angles):
+    ...         return -0.5 * ((poses[:, 0] - ranges[0]) / 0.2) ** 2
+    >>> rng = np.random.default_rng(0)
+    >>> p0 = np.column_stack([rng.uniform(0, 10, 1000), np.zeros(1000), np.zeros(1000)])
+    >>> tr = run_mcl(MCL(p0, lambda p, u, rng: p, GPS(), rng=rng), Run(), snapshot_steps=[0])
+    >>> len(tr), round(float(tr.poses[-1, 0]), 1), tr.beam_evaluations, sorted(tr.snapshots)
+    (4, 3.0, 4000, [0])
+    """
+    ranges = np.asarray(run.ranges, dtype=float)
+    angles = np.asarray(run.angles, dtype=float)
+    t = ranges.shape[0] if n_steps is None else int(n_steps)
+    if not 1 <= t <= ranges.shape[0]:
+        raise ValueError(f"n_steps must lie in [1, {ranges.shape[0]}]; got {n_steps!r}")
+    keep = {int(k) for k in snapshot_steps}
+    poses = np.zeros((t, 3))
+    means = np.zeros((t, 3))
+    stds = np.zeros((t, 3))
+    best = np.zeros(t)
+    n_p = np.zeros(t, dtype=np.int64)
+    n_eff = np.zeros(t)
+    res = np.zeros(t, dtype=bool)
+    deg = np.zeros(t, dtype=bool)
+    inj = np.zeros(t, dtype=np.int64)
+    p_inj = np.zeros(t)
+    evals = 0
+    snaps = {}
+    st = mcl.status
+    for k in range(t):
+        u = None if k == 0 else run.control(k)
+        n_p[k] = mcl.n
+        if k in keep:
+            # the snapshot needs the weighted set between update and resampling
+            st.resampled = False
+            st.n_injected = 0
+            if u is not None:
+                mcl.predict(u)
+            mcl.update(ranges[k], angles)
+            snaps[k] = (mcl.particles.copy(), mcl.weights)
+            e = mcl.estimate()
+            if mcl.needs_resampling():
+                mcl.resample()
+        else:
+            e = mcl.step(u, ranges[k], angles)
+        evals += int(n_p[k]) * angles.size
+        poses[k], means[k], stds[k], best[k] = e.pose, e.mean, e.std, e.best_weight
+        n_eff[k], res[k], deg[k] = e.n_eff, st.resampled, st.degenerate
+        inj[k], p_inj[k] = st.n_injected, st.p_inject
+    return MCLTrace(poses, means, stds, best, n_p, n_eff, res, deg, inj, p_inj, evals, snaps)
+
+
+# --------------------------------------------------------------------------- helpers
+def _ema_log(log_old: float, log_new: float, alpha: float) -> float:
+    """``log((1 - alpha) * exp(log_old) + alpha * exp(log_new))`` without leaving log space."""
+    return float(np.logaddexp(np.log1p(-alpha) + log_old, np.log(alpha) + log_new))
+
+
+def _get_resampler(r: Any) -> tuple[str, Callable]:
+    if callable(r):
+        return getattr(r, "__name__", "custom"), r
+    if isinstance(r, str) and r in RESAMPLERS:
+        return r, _rs.get_resampler(r)
+    raise ValueError(f"resampler must be one of {RESAMPLERS} or a callable f(weights, rng) -> indices; got {r!r}")
+
+
+# --------------------------------------------------------------------------- the oracle
+def mcl_step_loop(
+    particles: ArrayLike,
+    u: Any,
+    z: tuple,
+    motion: Motion,
+    sensor: Any,
+    rng: np.random.Generator,
+) -> NDArray[np.float64]:
+    """One step of the textbook particle filter, written as PR table 8.2.
+
+    For each particle: sample the motion model, weight it by the sensor
+    model; then draw ``M`` particles with probability proportional to the
+    weights (multinomial). Readable and slow; the tests compare
+    :class:`MCL` against it statistically.
+
+    Examples
+    --------
+    >>> class GPS:
+    ...     def log_likelihood(self, poses, z):
+    ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
+    >>> move = lambda poses, u, rng: poses + [u, 0.0, 0.0]
+    >>> p = np.column_stack([np.linspace(0, 4, 401), np.zeros(401), np.zeros(401)])
+    >>> new = mcl_step_loop(p, 1.0, (3.0,), move, GPS(), np.random.default_rng(0))
+    >>> round(float(new[:, 0].mean()), 1)
+    3.0
+    """
+    p = as_poses(particles, "particles")
+    m = p.shape[0]
+    moved = []
+    weights = []
+    for k in range(m):
+        x = np.asarray(motion(p[k : k + 1], u, rng), dtype=float)[0]
+        w = float(np.exp(sensor.log_likelihood(x[None, :], *z)[0]))
+        moved.append(x)
+        weights.append(w)
+    total = sum(weights)
+    out = []
+    for _ in range(m):
+        # spin the roulette wheel: walk the cumulative weights until they pass r
+        r = rng.random() * total
+        i = 0
+        c = weights[0]
+        while c <= r and i < m - 1:
+            i += 1
+            c += weights[i]
+        out.append(moved[i])
+    return np.array(out)

@@ -1,0 +1,263 @@
+"""Figures of Monte Carlo Localization: particle clouds, snapshot strips, animations, errors.
+
+Every function draws with matplotlib and returns what it made; none runs a
+filter. The data come from :func:`localize.mcl.run_mcl` (an
+:class:`~localize.mcl.MCLTrace` with snapshots) and a simulated run.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..geometry import as_poses
+from ..grid import OccupancyGrid
+from ..metrics import heading_error, position_error
+from . import draw_map, draw_robot, new_axes
+
+__all__ = [
+    "draw_particles",
+    "draw_belief",
+    "snapshot_strip",
+    "animate_snapshots",
+    "plot_errors",
+    "plot_particle_count",
+]
+
+
+def draw_particles(particles: ArrayLike, ax=None, weights: ArrayLike | None = None, color="tab:red",
+                   size: float = 3.0, headings: int = 0, heading_length: float = 0.3):
+    """Draw a particle cloud as dots (fast for tens of thousands), optionally with heading ticks.
+
+    Parameters
+    ----------
+    particles : array_like (N, 3)
+    weights : array_like (N,), optional
+        When given, dot opacity follows weight / max weight (faint = unlikely).
+    size : float
+        Dot size in points squared.
+    headings : int
+        Draw heading ticks on this many particles (a deterministic subsample).
+    heading_length : float
+        Tick length in metres.
+
+    Returns
+    -------
+    list of artists
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> arts = draw_particles(np.zeros((5, 3)), headings=5)
+    >>> len(arts)
+    2
+    >>> plt.close("all")
+    """
+    _, ax = new_axes(ax)
+    p = as_poses(particles, "particles").reshape(-1, 3)
+    rgba = None
+    if weights is not None:
+        import matplotlib.colors as mcolors
+
+        w = np.asarray(weights, dtype=float)
+        if w.shape != (p.shape[0],):
+            raise ValueError(f"weights must have shape ({p.shape[0]},); got {w.shape}")
+        w = w / w.max() if w.max() > 0 else np.ones_like(w)
+        rgba = np.tile(mcolors.to_rgba(color), (len(w), 1))
+        rgba[:, 3] = 0.15 + 0.85 * w
+    arts = [ax.scatter(p[:, 0], p[:, 1], s=size, c=rgba if rgba is not None else color,
+                       linewidths=0, zorder=2, alpha=None if rgba is not None else 0.5)]
+    if headings and p.shape[0]:
+        k = np.linspace(0, p.shape[0] - 1, min(int(headings), p.shape[0])).astype(int)
+        q = p[k]
+        from matplotlib.collections import LineCollection
+
+        seg = np.stack([q[:, :2], q[:, :2] + heading_length * np.column_stack([np.cos(q[:, 2]), np.sin(q[:, 2])])], 1)
+        lc = LineCollection(seg, colors=color, linewidths=0.6, alpha=0.6, zorder=2)
+        ax.add_collection(lc)
+        arts.append(lc)
+    return arts
+
+
+def draw_belief(grid: OccupancyGrid, particles: ArrayLike, weights: ArrayLike | None = None,
+                true_pose: ArrayLike | None = None, estimate: ArrayLike | None = None, ax=None,
+                title: str | None = None, size: float = 3.0):
+    """Map, particle cloud, the true robot (blue) and the estimate (green cross).
+
+    Returns the axes.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from localize.maps import office
+    >>> ax = draw_belief(office(), np.array([[5.0, 5.0, 0.0]]), true_pose=[5, 5, 0], estimate=[5, 5, 0],
+    ...                  title="one particle")
+    >>> ax.get_title()
+    'one particle'
+    >>> plt.close("all")
+    """
+    _, ax = new_axes(ax, figsize=(7, 4.5))
+    draw_map(grid, ax=ax)
+    draw_particles(particles, ax=ax, weights=weights, size=size)
+    if true_pose is not None:
+        draw_robot(true_pose, ax=ax, radius=0.3, color="tab:blue")
+    if estimate is not None:
+        e = as_poses(estimate, "estimate").reshape(3)
+        ax.plot([e[0]], [e[1]], marker="x", color="tab:green", markersize=10, mew=2.5, zorder=4)
+    xmin, xmax, ymin, ymax = grid.extent
+    ax.set_xlim(xmin, xmax)
+    ax.set_ylim(ymin, ymax)
+    if title is not None:
+        ax.set_title(title, fontsize=9)
+    return ax
+
+
+def snapshot_strip(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLike | None = None,
+                   estimates: ArrayLike | None = None, steps: Sequence[int] | None = None, ncols: int = 4,
+                   width: float = 12.0, size: float = 2.0):
+    """A grid of small maps, one per snapshot step: the cloud converging over time.
+
+    Parameters
+    ----------
+    snapshots : dict
+        ``step -> (particles, weights)`` as in :attr:`localize.mcl.MCLTrace.snapshots`.
+    true_poses, estimates : array_like (T, 3), optional
+        Drawn at each snapshot's step.
+    steps : sequence of int, optional
+        Which snapshots, in order (default all, sorted).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from localize.maps import office
+    >>> snaps = {0: (np.array([[5.0, 5.0, 0.0]]), np.ones(1)), 3: (np.array([[6.0, 5.0, 0.0]]), np.ones(1))}
+    >>> fig = snapshot_strip(office(), snaps)
+    >>> [ax.get_title() for ax in fig.axes]
+    ['step 0 (1 particles)', 'step 3 (1 particles)']
+    >>> plt.close(fig)
+    """
+    import matplotlib.pyplot as plt
+
+    steps = sorted(snapshots) if steps is None else list(steps)
+    if not steps:
+        raise ValueError("snapshots is empty: nothing to draw")
+    ncols = max(1, min(int(ncols), len(steps)))
+    nrows = int(np.ceil(len(steps) / ncols))
+    aspect = grid.height_m / grid.width_m
+    fig, axes = plt.subplots(nrows, ncols, figsize=(width, width / ncols * aspect * nrows + 0.4 * nrows),
+                             squeeze=False)
+    for ax, k in zip(axes.flat, steps):
+        p, w = snapshots[k]
+        draw_belief(grid, p, w, None if true_poses is None else np.asarray(true_poses)[k],
+                    None if estimates is None else np.asarray(estimates)[k], ax=ax,
+                    title=f"step {k} ({len(p)} particles)", size=size)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_xlabel("")
+        ax.set_ylabel("")
+    for ax in list(axes.flat)[len(steps):]:
+        ax.remove()
+    fig.tight_layout()
+    return fig
+
+
+def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLike | None = None,
+                      estimates: ArrayLike | None = None, interval: int = 250, figsize=(6.0, 3.8),
+                      size: float = 2.0, dpi: int = 72):
+    """A matplotlib animation of the particle cloud, one frame per snapshot.
+
+    Embed it in a notebook with ``IPython.display.HTML(anim.to_jshtml())``;
+    ``dpi`` sets the frames' resolution (and so the size of the embedded HTML).
+    Returns the :class:`matplotlib.animation.FuncAnimation` (its figure is
+    ``anim._fig``; close it after embedding to avoid a duplicate still).
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from localize.maps import office
+    >>> snaps = {k: (np.array([[5.0 + k, 5.0, 0.0]]), np.ones(1)) for k in range(3)}
+    >>> anim = animate_snapshots(office(), snaps, figsize=(3, 2))
+    >>> "<script" in anim.to_jshtml(fps=4)
+    True
+    >>> plt.close("all")
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation
+
+    steps = sorted(snapshots)
+    if not steps:
+        raise ValueError("snapshots is empty: nothing to animate")
+    fig, ax = plt.subplots(figsize=figsize, dpi=dpi)
+    tp = None if true_poses is None else np.asarray(true_poses)
+    es = None if estimates is None else np.asarray(estimates)
+
+    def frame(i):
+        ax.clear()
+        k = steps[i]
+        p, w = snapshots[k]
+        draw_belief(grid, p, w, None if tp is None else tp[k], None if es is None else es[k], ax=ax,
+                    title=f"step {k}: {len(p)} particles", size=size)
+        return ax.get_children()
+
+    anim = FuncAnimation(fig, frame, frames=len(steps), interval=interval, blit=False)
+    fig.tight_layout()
+    return anim
+
+
+def plot_errors(estimates: ArrayLike, truth: ArrayLike, ax=None, label: str | None = None,
+                kidnap_steps: Sequence[int] = (), heading: bool = True, **kwargs: Any):
+    """Error versus time: position error (m, left axis) and heading error (deg, right axis).
+
+    Kidnapping steps are marked with vertical dotted lines. Returns the axes.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> t = np.zeros((5, 3)); e = t + [0.1, 0.0, 0.05]
+    >>> ax = plot_errors(e, t, kidnap_steps=[2])
+    >>> ax.get_ylabel()
+    'position error [m]'
+    >>> plt.close("all")
+    """
+    _, ax = new_axes(ax, figsize=(7, 3))
+    pe = np.atleast_1d(position_error(estimates, truth))
+    he = np.atleast_1d(heading_error(estimates, truth))
+    steps = np.arange(len(pe))
+    (line,) = ax.plot(steps, pe, label=label or "position error", **kwargs)
+    if heading:
+        ax2 = ax.twinx()
+        ax2.plot(steps, np.degrees(he), color=line.get_color(), ls=":", alpha=0.7)
+        ax2.set_ylabel("heading error [deg] (dotted)")
+    for k in kidnap_steps:
+        ax.axvline(k, color="k", ls=":", lw=1)
+    ax.set_xlabel("step")
+    ax.set_ylabel("position error [m]")
+    ax.set_yscale("symlog", linthresh=0.1)
+    ax.grid(True, alpha=0.3)
+    return ax
+
+
+def plot_particle_count(counts: ArrayLike, ax=None, label: str | None = None, **kwargs: Any):
+    """Number of particles per step (KLD-sampling). Returns the axes.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> plot_particle_count([1000, 500, 200]).get_yscale()
+    'log'
+    >>> plt.close("all")
+    """
+    _, ax = new_axes(ax, figsize=(7, 3))
+    c = np.asarray(counts)
+    ax.plot(np.arange(len(c)), c, label=label, **kwargs)
+    ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_ylabel("particles")
+    ax.grid(True, alpha=0.3)
+    return ax
