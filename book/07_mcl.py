@@ -50,7 +50,7 @@ import localize
 from localize import maps
 from localize.mcl import MCL, OdometryMotion, estimate_pose, run_mcl
 from localize.metrics import heading_error, position_error
-from localize.plot import draw_map, draw_robot, draw_scan
+from localize.plot import animation_html, draw_map, draw_robot, draw_scan
 from localize.plot.mcl import animate_snapshots, draw_belief, plot_errors, snapshot_strip
 from localize.sensors import BeamModel, LikelihoodField
 from localize.sim import range_run
@@ -194,7 +194,7 @@ plt.show()
 # %% tags=["nbval-ignore-output", "remove-input"]
 anim = animate_snapshots(grid, {k: (p[::4], w[::4]) for k, (p, w) in trace.snapshots.items()},
                          run.poses, trace.poses, interval=700, figsize=(6, 3.8))
-html = anim.to_jshtml(default_mode="once")
+html = animation_html(anim, default_mode="once")
 plt.close(anim._fig)
 HTML(html)
 

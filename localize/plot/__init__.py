@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike
 from ..geometry import as_poses
 from ..grid import OccupancyGrid
 
-__all__ = ["new_axes", "draw_map", "draw_poses", "draw_robot", "draw_scan", "MAP_CMAP"]
+__all__ = ["new_axes", "draw_map", "draw_poses", "draw_robot", "draw_scan", "animation_html", "MAP_CMAP"]
 
 MAP_CMAP = "gray_r"
 
@@ -108,3 +108,39 @@ def draw_scan(pose: ArrayLike, angles: ArrayLike, ranges: ArrayLike, ax=None, ma
         artists.append(lc)
     artists.append(ax.scatter(ex[hit], ey[hit], s=6, color=color, zorder=3, **kwargs))
     return artists
+
+
+_FA_ICONS = {
+    "fa-minus": "&#8722;", "fa-plus": "+", "fa-fast-backward": "&#9198;", "fa-step-backward": "&#9664;&#9646;",
+    "fa-play": "&#9654;", "fa-pause": "&#10074;&#10074;", "fa-step-forward": "&#9646;&#9654;",
+    "fa-fast-forward": "&#9197;",
+}
+
+
+def animation_html(anim, **kwargs) -> str:
+    """``anim.to_jshtml(**kwargs)`` made to work offline.
+
+    Matplotlib's JavaScript player loads its button icons from a CDN
+    (Font Awesome), which an offline book or a closed network cannot reach.
+    This replaces the icons by Unicode symbols and drops the remote
+    stylesheet; the player is otherwise unchanged.
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> from matplotlib import animation
+    >>> fig, ax = plt.subplots()
+    >>> (line,) = ax.plot([0, 1])
+    >>> anim = animation.FuncAnimation(fig, lambda i: line.set_ydata([0, i]), frames=2)
+    >>> html = animation_html(anim)
+    >>> "https://" in html, "<script" in html
+    (False, True)
+    >>> plt.close(fig)
+    """
+    import re
+
+    html = anim.to_jshtml(**kwargs)
+    html = re.sub(r'<link[^>]*font-awesome[^>]*>', "", html)
+    for cls, symbol in _FA_ICONS.items():
+        html = re.sub(rf'<i class="fa {cls}"></i>', symbol, html)
+    return html

@@ -172,7 +172,7 @@ def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLik
                       size: float = 2.0, dpi: int = 72):
     """A matplotlib animation of the particle cloud, one frame per snapshot.
 
-    Embed it in a notebook with ``IPython.display.HTML(anim.to_jshtml())``;
+    Embed it in a notebook with ``IPython.display.HTML(localize.plot.animation_html(anim))``;
     ``dpi`` sets the frames' resolution (and so the size of the embedded HTML).
     Returns the :class:`matplotlib.animation.FuncAnimation` (its figure is
     ``anim._fig``; close it after embedding to avoid a duplicate still).
