@@ -181,7 +181,9 @@ def corridor_belief(run, particles: ArrayLike, weights: ArrayLike | None, step: 
     bins = int(4 * L) if bins is None else int(bins)
     for j in np.flatnonzero(run.doors):
         ax.axvspan(j, j + 1, color="tan", alpha=0.35, lw=0)
-    ax.hist(x, bins=bins, range=(0, L), weights=w, color=color, alpha=0.85)
+    # one filled step artist instead of a bar patch per bin (ax.hist): several times faster to redraw
+    counts, edges = np.histogram(x, bins=bins, range=(0, L), weights=w)
+    ax.stairs(counts, edges, fill=True, color=color, alpha=0.85)
     ax.axvline(run.positions[step], color="tab:red", lw=2)
     ax.set_xlim(0, L)
     z = "door" if run.z[step] else "wall"

@@ -138,7 +138,8 @@ def noise_figure(heading_noise: float = 1.0, sigma_bearing: float = 0.05, sense_
     ids = "landmarks look alike" if not sc.known_ids else "landmarks identified"
     fig.suptitle(f"heading noise ×{heading_noise:g}, bearing σ {np.degrees(sc.sigma_bearing):.1f}°, "
                  f"sightings every {sc.sense_every} step(s), {sc.n_particles} particles, {ids}", fontsize=10)
-    fig.tight_layout()
+    # fixed margins: tight_layout on log axes cost more than the filters themselves (2x the redraw time)
+    fig.subplots_adjust(left=0.05, right=0.98, bottom=0.12, top=0.84, wspace=0.22)
     return fig
 
 
