@@ -45,8 +45,9 @@ def build(py: Path, timeout: int = 900) -> float:
     dt = time.perf_counter() - t0
     # keep metadata minimal and machine-independent
     nb.metadata.pop("widgets", None)
-    for cell in nb.cells:
+    for k, cell in enumerate(nb.cells):
         cell.metadata.pop("execution", None)
+        cell.id = f"cell-{k:03d}"  # stable ids: rebuilding changes only what really changed
         strip_volatile(cell)
     out = py.with_suffix(".ipynb")
     nbformat.write(nb, out)
