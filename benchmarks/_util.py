@@ -24,3 +24,18 @@ def table(rows: list[dict], columns: list[str]) -> str:
     sep = "|" + "|".join("---" for _ in columns) + "|"
     body = ["| " + " | ".join(str(r.get(c, "")) for c in columns) + " |" for r in rows]
     return "\n".join([head, sep, *body])
+
+
+def best_wall_cpu(fn: Callable[[], object], repeats: int = 5) -> tuple[float, float]:
+    """Best wall-clock and best CPU seconds of one call of ``fn`` over ``repeats`` calls (after a warm-up).
+
+    CPU time (this process only) is the fairer number on a shared machine.
+    """
+    fn()
+    walls, cpus = [], []
+    for _ in range(repeats):
+        w, c = time.perf_counter(), time.process_time()
+        fn()
+        walls.append(time.perf_counter() - w)
+        cpus.append(time.process_time() - c)
+    return min(walls), min(cpus)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from _util import best_wall_cpu  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 
 from localize.maps import benchmark_map
 from localize.raycast import RayCaster, build_table
@@ -24,14 +25,7 @@ N_POSES, N_BEAMS, MAX_RANGE = 10_000, 60, 10.0
 
 def best(fn, repeats: int = 5) -> tuple[float, float]:
     """Best wall and CPU seconds over ``repeats`` calls (after one warm-up call)."""
-    fn()
-    walls, cpus = [], []
-    for _ in range(repeats):
-        w, c = time.perf_counter(), time.process_time()
-        fn()
-        walls.append(time.perf_counter() - w)
-        cpus.append(time.process_time() - c)
-    return min(walls), min(cpus)
+    return best_wall_cpu(fn, repeats)
 
 
 def main() -> None:

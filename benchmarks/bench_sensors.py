@@ -10,9 +10,8 @@ log-likelihood of 10,000 x 60 beams in under 15 ms given the expected ranges.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
+from _util import best_wall_cpu  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 
 from localize.maps import benchmark_map
 from localize.raycast import RayCaster
@@ -22,14 +21,8 @@ N_POSES, N_BEAMS, MAX_RANGE = 10_000, 60, 10.0
 
 
 def best(fn, repeats: int = 10) -> tuple[float, float]:
-    fn()
-    walls, cpus = [], []
-    for _ in range(repeats):
-        w, c = time.perf_counter(), time.process_time()
-        fn()
-        walls.append(time.perf_counter() - w)
-        cpus.append(time.process_time() - c)
-    return min(walls), min(cpus)
+    """Best wall and CPU seconds over ``repeats`` calls (after one warm-up call)."""
+    return best_wall_cpu(fn, repeats)
 
 
 def main() -> None:

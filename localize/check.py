@@ -405,7 +405,7 @@ def sample_odometry(fn: Callable) -> Report:
                    _call(r, "uses the rng it is given (reproducible)", fn, np.zeros((5, 3)), u, alphas,
                          np.random.default_rng(7)))
         r.add("uses the rng it is given (reproducible)", np.array_equal(a, b), "",
-              "draw noise with rng.normal(...), not np.random.normal(...)")
+              "draw noise with rng.normal(...) from the rng argument, not from numpy's global random functions")
 
     return _run("sample_odometry", body)
 
