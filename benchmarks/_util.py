@@ -39,3 +39,21 @@ def best_wall_cpu(fn: Callable[[], object], repeats: int = 5) -> tuple[float, fl
         walls.append(time.perf_counter() - w)
         cpus.append(time.process_time() - c)
     return min(walls), min(cpus)
+
+
+def scan_scene(n_poses: int = 10_000, n_beams: int = 60, seed: int = 0):
+    """The scene of the ray-casting and sensor speed targets.
+
+    Returns ``(grid, poses, angles, rng)``: ``benchmark_map(800)``, ``n_poses``
+    poses drawn uniformly over its free space, ``n_beams`` beam angles over
+    180 degrees, and the generator (to draw more from the same stream).
+    """
+    import numpy as np
+
+    from localize.maps import benchmark_map
+
+    grid = benchmark_map(800)
+    rng = np.random.default_rng(seed)
+    poses = grid.sample_free(n_poses, rng)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, n_beams)
+    return grid, poses, angles, rng

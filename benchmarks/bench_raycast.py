@@ -15,24 +15,15 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from _util import best_wall_cpu  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
+from _util import best_wall_cpu, scan_scene  # benchmarks/ is on sys.path when run as a script
 
-from localize.maps import benchmark_map
 from localize.raycast import RayCaster, build_table
 
 N_POSES, N_BEAMS, MAX_RANGE = 10_000, 60, 10.0
 
 
-def best(fn, repeats: int = 5) -> tuple[float, float]:
-    """Best wall and CPU seconds over ``repeats`` calls (after one warm-up call)."""
-    return best_wall_cpu(fn, repeats)
-
-
 def main() -> None:
-    grid = benchmark_map(800)
-    rng = np.random.default_rng(0)
-    poses = grid.sample_free(N_POSES, rng)
-    angles = np.linspace(-np.pi / 2, np.pi / 2, N_BEAMS)
+    grid, poses, angles, rng = scan_scene(N_POSES, N_BEAMS)
     rays = N_POSES * N_BEAMS
     rows = []
 
@@ -40,7 +31,7 @@ def main() -> None:
     w, c = time.perf_counter(), time.process_time()
     march.clearance  # noqa: B018 - build the cache
     rows.append(("march: clearance field", time.perf_counter() - w, time.process_time() - c, None))
-    w, c = best(lambda: march.cast(poses, angles))
+    w, c = best_wall_cpu(lambda: march.cast(poses, angles), 5)
     rows.append(("march: 10,000 x 60", w, c, rays))
 
     w, c = time.perf_counter(), time.process_time()
@@ -48,14 +39,14 @@ def main() -> None:
     rows.append(("lut: build 360 bins", time.perf_counter() - w, time.process_time() - c, None))
     lut = RayCaster(grid, MAX_RANGE, "lut", n_bins=360)
     lut.__dict__["table"] = table  # reuse the table just built
-    w, c = best(lambda: lut.cast(poses, angles, dtype=np.float32), repeats=10)
+    w, c = best_wall_cpu(lambda: lut.cast(poses, angles, dtype=np.float32), 10)
     rows.append(("lut: 10,000 x 60 (float32 out)", w, c, rays))
-    w, c = best(lambda: lut.cast(poses, angles), repeats=10)
+    w, c = best_wall_cpu(lambda: lut.cast(poses, angles), 10)
     rows.append(("lut: 10,000 x 60 (float64 out)", w, c, rays))
 
     exact = RayCaster(grid, MAX_RANGE, "exact")
     sub = poses[:100]
-    w, c = best(lambda: exact.cast(sub, angles), repeats=1)
+    w, c = best_wall_cpu(lambda: exact.cast(sub, angles), 1)
     rows.append(("exact (oracle): 100 x 60", w, c, 100 * N_BEAMS))
 
     print(f"Ray casting on benchmark_map(800), max_range {MAX_RANGE} m, {N_POSES} poses x {N_BEAMS} beams\n")

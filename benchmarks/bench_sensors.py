@@ -11,25 +11,16 @@ log-likelihood of 10,000 x 60 beams in under 15 ms given the expected ranges.
 from __future__ import annotations
 
 import numpy as np
-from _util import best_wall_cpu  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
+from _util import best_wall_cpu, scan_scene  # benchmarks/ is on sys.path when run as a script
 
-from localize.maps import benchmark_map
 from localize.raycast import RayCaster
 from localize.sensors import BeamModel, LikelihoodField
 
 N_POSES, N_BEAMS, MAX_RANGE = 10_000, 60, 10.0
 
 
-def best(fn, repeats: int = 10) -> tuple[float, float]:
-    """Best wall and CPU seconds over ``repeats`` calls (after one warm-up call)."""
-    return best_wall_cpu(fn, repeats)
-
-
 def main() -> None:
-    grid = benchmark_map(800)
-    rng = np.random.default_rng(0)
-    poses = grid.sample_free(N_POSES, rng)
-    angles = np.linspace(-np.pi / 2, np.pi / 2, N_BEAMS)
+    grid, poses, angles, rng = scan_scene(N_POSES, N_BEAMS)
     beams = N_POSES * N_BEAMS
     caster = RayCaster(grid, MAX_RANGE, "march")
     bm = BeamModel(grid, MAX_RANGE, caster=caster)
@@ -37,13 +28,13 @@ def main() -> None:
     expected32 = caster.cast(poses, angles, dtype=np.float32)
     expected64 = expected32.astype(float)
     rows = []
-    w, c = best(lambda: bm.log_likelihood_expected(scan, expected32))
+    w, c = best_wall_cpu(lambda: bm.log_likelihood_expected(scan, expected32), 10)
     rows.append(("beam model, given expected ranges (float32)", w, c))
-    w, c = best(lambda: bm.log_likelihood_expected(scan, expected64))
+    w, c = best_wall_cpu(lambda: bm.log_likelihood_expected(scan, expected64), 10)
     rows.append(("beam model, given expected ranges (float64)", w, c))
     lf = LikelihoodField(grid, MAX_RANGE, 0.9, 0.1, sigma_hit=0.2)
     z = np.minimum(scan, MAX_RANGE - 1e-3)  # every beam returns: the worst case for the field
-    w, c = best(lambda: lf.log_likelihood(poses, z, angles))
+    w, c = best_wall_cpu(lambda: lf.log_likelihood(poses, z, angles), 10)
     rows.append(("likelihood field, whole scan", w, c))
     print(f"Measurement models on benchmark_map(800), {N_POSES} poses x {N_BEAMS} beams\n")
     print("| task | wall [ms] | CPU [ms] | M beams/s (CPU) |")

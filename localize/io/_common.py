@@ -75,6 +75,24 @@ class SkipCounter:
     def as_dict(self) -> dict[str, int]:
         return dict(self.counts)
 
+    def malformed(self, line: int, message: str, on_error: str = "raise") -> None:
+        """A record that breaks its format: raise :class:`FormatError` or, with ``on_error="skip"``, count it.
+
+        Examples
+        --------
+        >>> c = SkipCounter("a.log")
+        >>> c.malformed(4, "expected 5 fields; got 3", on_error="skip")
+        >>> c.as_dict()
+        {'malformed records': 1}
+        >>> c.malformed(9, "expected 5 fields; got 2")
+        Traceback (most recent call last):
+        ...
+        localize.io._common.FormatError: a.log:9: expected 5 fields; got 2
+        """
+        if on_error == "raise":
+            raise FormatError(self.path, line, message)
+        self.add("malformed records", line, message)
+
     def warn(self, stacklevel: int = 3) -> None:
         if not self.counts:
             return

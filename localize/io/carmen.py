@@ -140,9 +140,7 @@ def read_carmen_log(
     beams: dict[str, tuple[int, int]] = {}  # kind -> (n, first line)
 
     def bad(n: int, msg: str) -> None:
-        if on_error == "raise":
-            raise FormatError(path, n, msg)
-        skips.add("malformed records", n, msg)
+        skips.malformed(n, msg, on_error)
 
     for n, raw in read_lines(path):
         tokens = raw.split()

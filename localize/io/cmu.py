@@ -291,9 +291,7 @@ def read_cmu_log(
     ranges: list[NDArray] = []
 
     def bad(n: int, msg: str) -> None:
-        if on_error == "raise":
-            raise FormatError(path, n, msg)
-        skips.add("malformed records", n, msg)
+        skips.malformed(n, msg, on_error)
 
     for n, raw in read_lines(path):
         tokens = raw.split()
