@@ -111,8 +111,8 @@ print("difference of 1° and 359°:", round(np.degrees(geometry.angle_diff(np.ra
 # %%
 a = np.array([2.0, 1.0, np.pi / 2])    # robot at (2, 1), facing +y
 b = np.array([1.0, 0.0, 0.0])          # one metre straight ahead, in the robot's frame
-print("a ⊕ b =", geometry.compose(a, b).round(6))
-print("b seen from a again:", geometry.relative(a, geometry.compose(a, b)).round(6))
+print("a ⊕ b =", geometry.compose(a, b).round(6) + 0.0)   # + 0.0 turns a rounded -0.0 into 0.0
+print("b seen from a again:", geometry.relative(a, geometry.compose(a, b)).round(6) + 0.0)
 
 # %% [markdown]
 # **Maps.** A map is a `localize.OccupancyGrid`: a 2-D array of occupancy

@@ -435,7 +435,9 @@ for w in [0.5, 1e-4, 1e-9, 0.0]:
         r = np.float64(1.0) / np.float64(w)
         pr_x = -r * np.sin(0.0) + r * np.sin(0.0 + w * 1.0)
         pr_y = r * np.cos(0.0) - r * np.cos(0.0 + w * 1.0)
-    print(f"omega = {w:<7g} chord form: ({chord[0]:.12f}, {chord[1]:.12f})   v/omega form: ({pr_x:.12f}, {pr_y:.12f})")
+    # x to 9 decimals, y to 6 significant digits: fine enough to show what rounding destroys, and no
+    # finer than every CPU agrees on (the subtraction at omega = 1e-4 leaves ~1e-12 m of round-off)
+    print(f"omega = {w:<7g} chord form: ({chord[0]:.9f}, {chord[1]:.5e})   v/omega form: ({pr_x:.9f}, {pr_y:.5e})")
 
 # %% [markdown]
 # At $\omega = 10^{-9}$ the textbook form has lost the sideways offset to

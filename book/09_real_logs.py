@@ -93,7 +93,7 @@ grid = io.read_cmu_map(map_file)
 log = io.read_cmu_log(log_file)
 print(grid)
 print(log)
-print("laser offset measured from the file:", log.sensor_offset.round(3), "(x forward, y left, theta)")
+print("laser offset measured from the file:", log.sensor_offset.round(3) + 0.0, "(x forward, y left, theta)")
 print("first odometry pose [m, m, rad]:", log.odometry[0].round(3))
 
 # %% [markdown]

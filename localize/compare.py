@@ -70,6 +70,8 @@ __all__ = [
     "monte_carlo",
     "summary_rows",
     "format_table",
+    "rate_tolerance",
+    "rates_differ",
 ]
 
 #: A run fails when its mean position error over the last FAIL_WINDOW steps exceeds this (metres).
@@ -675,13 +677,20 @@ def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None) -> Mo
 def summary_rows(mcs, timing: bool = False) -> list[dict]:
     """One row per scenario and filter: mean ± std of the metrics over seeds.
 
-    Columns: ``scenario, filter, pos_rmse, pos_rmse_std, head_rmse_deg,
-    head_rmse_deg_std, nees, nees_median, nees_in_band, failure_rate`` (and
-    ``ms_per_step`` with ``timing=True`` -- wall-clock, so not for stored
-    notebook outputs). ``nees`` is the seed- and time-average over the
-    second half, ``nees_median`` the median of the same values (robust to
-    a few collapsed runs); ``nees_in_band`` the fraction of those steps inside the
-    95% band; RMSEs are over the seeds that did not fail (NaN if all did).
+    Columns: ``scenario, filter, failure_rate, pos_rmse_all, pos_rmse_all_std,
+    pos_rmse, pos_rmse_std, head_rmse_deg_all, head_rmse_deg_all_std, head_rmse_deg, head_rmse_deg_std,
+    nees, nees_median, nees_in_band`` (and ``ms_per_step`` with ``timing=True`` --
+    wall-clock, so not for stored notebook outputs).
+
+    * ``pos_rmse_all`` / ``head_rmse_deg_all``: mean over **all** seeds of the
+      per-seed RMSE (failed runs included: what a user of the filter gets);
+      ``pos_rmse`` / ``head_rmse_deg``: over the seeds that did **not** fail (how
+      accurate the filter is when it works; NaN if every seed failed).
+    * ``nees``: the seed- and time-average over the second half (dominated by
+      the worst runs: an overconfident filter shows here); ``nees_median``: the
+      median of the same values; ``nees_in_band``: the fraction of those steps
+      whose seed-averaged NEES lies inside the 95% band
+      (:attr:`MonteCarlo.nees_bounds`).
     """
     rows = []
     for mc in mcs:
@@ -690,19 +699,67 @@ def summary_rows(mcs, timing: bool = False) -> list[dict]:
             ok = ~m.failed
             row = dict(
                 scenario=mc.scenario.title, filter=name,
+                failure_rate=m.failure_rate,
+                pos_rmse_all=float(np.mean(m.pos_rmse)),
+                pos_rmse_all_std=float(np.std(m.pos_rmse)),
                 pos_rmse=float(np.mean(m.pos_rmse[ok])) if ok.any() else float("nan"),
                 pos_rmse_std=float(np.std(m.pos_rmse[ok])) if ok.any() else float("nan"),
+                head_rmse_deg_all=float(np.degrees(np.mean(m.head_rmse))),
+                head_rmse_deg_all_std=float(np.degrees(np.std(m.head_rmse))),
                 head_rmse_deg=float(np.degrees(np.mean(m.head_rmse[ok]))) if ok.any() else float("nan"),
                 head_rmse_deg_std=float(np.degrees(np.std(m.head_rmse[ok]))) if ok.any() else float("nan"),
                 nees=float(m.nees[:, half:].mean()),
                 nees_median=float(np.median(m.nees[:, half:])),
                 nees_in_band=mc.nees_in_band(name),
-                failure_rate=m.failure_rate,
             )
             if timing:
                 row["ms_per_step"] = float(1e3 * m.sec_per_step.mean())
             rows.append(row)
     return rows
+
+
+def rate_tolerance(n: int, rate: float = 0.5, z: float = 3.0) -> float:
+    """How far a failure rate measured on ``n`` seeds may fall from ``rate`` by chance alone.
+
+    ``z`` binomial standard errors, ``z * sqrt(rate (1 - rate) / n)``, plus one
+    run (``1 / n``) for the discreteness of a count. A claim about a Monte Carlo
+    rate ("MCL fails in about 10% of the runs") is checked with this tolerance,
+    so that it holds on any machine: another CPU rounds differently, a few
+    seeds take another path, and the count moves by about a standard error.
+
+    Examples
+    --------
+    >>> round(rate_tolerance(50), 3)                 # the widest: at a rate of 1/2
+    0.232
+    >>> round(rate_tolerance(50, rate=0.0), 3)       # a claimed zero allows one run in 50
+    0.02
+    """
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"n (the number of seeds) must be >= 1; got {n}")
+    if not 0.0 <= rate <= 1.0:
+        raise ValueError(f"rate must lie in [0, 1]; got {rate!r}")
+    return float(z * np.sqrt(rate * (1.0 - rate) / n) + 1.0 / n)
+
+
+def rates_differ(rate_a: float, rate_b: float, n: int, z: float = 3.0) -> bool:
+    """Is ``rate_a`` larger than ``rate_b`` by more than chance explains?
+
+    Both rates measured on ``n`` seeds each; the difference must exceed ``z``
+    standard errors of a difference of two binomial proportions (each at
+    least one run in ``n``, so that two counts of zero do not look certain).
+
+    Examples
+    --------
+    >>> rates_differ(0.80, 0.08, 50), rates_differ(0.12, 0.08, 50)
+    (True, False)
+    """
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"n (the number of seeds) must be >= 1; got {n}")
+    pa, pb = (min(max(p, 1.0 / n), 1.0 - 1.0 / n) for p in (rate_a, rate_b))
+    se = np.sqrt(pa * (1 - pa) / n + pb * (1 - pb) / n)
+    return bool(rate_a - rate_b > z * se)
 
 
 def format_table(rows: list[dict], digits: int = 2) -> str:
@@ -712,16 +769,17 @@ def format_table(rows: list[dict], digits: int = 2) -> str:
     --------
     >>> print(format_table([dict(scenario="s", filter="EKF", pos_rmse=0.1234, pos_rmse_std=0.01,
     ...                          failure_rate=0.0)]))
-    | scenario | filter | position RMSE [m] | failure rate |
+    | scenario | filter | failure rate | position RMSE, successes [m] |
     |---|---|---|---|
-    | s | EKF | 0.12 ± 0.01 | 0% |
+    | s | EKF | 0% | 0.12 ± 0.01 |
     """
     if not rows:
         raise ValueError("rows is empty")
-    cols = [("scenario", "scenario"), ("filter", "filter"), ("pos_rmse", "position RMSE [m]"),
-            ("head_rmse_deg", "heading RMSE [deg]"), ("nees", "mean NEES (3 = ideal)"),
-            ("nees_median", "median NEES"),
-            ("nees_in_band", "NEES in 95% band"), ("failure_rate", "failure rate"), ("ms_per_step", "ms/step")]
+    cols = [("scenario", "scenario"), ("filter", "filter"), ("failure_rate", "failure rate"),
+            ("pos_rmse_all", "position RMSE, all runs [m]"), ("pos_rmse", "position RMSE, successes [m]"),
+            ("head_rmse_deg_all", "heading RMSE, all runs [deg]"), ("head_rmse_deg", "heading RMSE, successes [deg]"),
+            ("nees", "mean NEES (3 = ideal)"), ("nees_in_band", "NEES in 95% band"),
+            ("nees_median", "median NEES"), ("ms_per_step", "ms/step")]
     cols = [(k, h) for k, h in cols if k in rows[0]]
 
     def fmt(r, k):
@@ -734,7 +792,9 @@ def format_table(rows: list[dict], digits: int = 2) -> str:
             if not np.isfinite(v):
                 return "—"
             return f"{v:.{digits}f} ± {r[k + '_std']:.{digits}f}"
-        return f"{v:.{digits}f}" if abs(v) < 1e4 else f"{v:.2e}"
+        if not np.isfinite(v):
+            return "—"
+        return f"{v:.{digits}f}" if abs(v) < 1e4 else f"{v:.1e}"
 
     lines = ["| " + " | ".join(h for _, h in cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(fmt(r, k) for k, _ in cols) + " |" for r in rows]

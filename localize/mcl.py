@@ -417,7 +417,9 @@ def _cluster_labels(xy: NDArray, w: NDArray, size: float, mass: float) -> tuple[
     shape = tuple(int(v) + 1 for v in ij.max(axis=0))
     flat = ij[:, 0] * shape[1] + ij[:, 1]
     cell_w = np.bincount(flat, weights=w, minlength=shape[0] * shape[1])
-    order = np.argsort(cell_w)[::-1]
+    # heaviest first; ties (cells holding the same number of equal-weight copies are common after
+    # resampling) in index order: an unstable sort orders them differently on different CPUs
+    order = np.argsort(-cell_w, kind="stable")
     k = int(np.searchsorted(np.cumsum(cell_w[order]), mass * cell_w.sum())) + 1
     keep = np.zeros(cell_w.size, dtype=bool)
     keep[order[:k]] = True

@@ -187,3 +187,44 @@ def test_scenario_3_mcl_succeeds_in_90_percent_of_seeds_and_ekf_mostly_fails():
     mc = C.monte_carlo(C.scenario("global", n_steps=30), range(S), filters=("EKF", "MCL"))
     assert mc.metrics["MCL"].failure_rate <= 0.10, mc.metrics["MCL"].failed
     assert mc.metrics["EKF"].failure_rate >= 0.5
+
+
+def test_summary_rows_report_rmse_over_all_runs_and_over_successes():
+    sc = C.scenario("tracking", n_steps=20)
+    runs = [C.run_filters(sc, s, filters=("EKF",)) for s in range(3)]
+    runs[0].estimates["EKF"] = runs[0].estimates["EKF"] + [5.0, 0.0, 0.0]   # seed 0 fails: 5 m off throughout
+    mc = C.MonteCarlo(sc, [0, 1, 2], {"EKF": C._metrics(runs, "EKF")})
+    (row,) = C.summary_rows([mc])
+    m = mc.metrics["EKF"]
+    assert m.failed.tolist() == [True, False, False]
+    assert row["failure_rate"] == pytest.approx(1 / 3)
+    assert row["pos_rmse"] == pytest.approx(m.pos_rmse[1:].mean())           # successes only
+    assert row["pos_rmse_all"] == pytest.approx(m.pos_rmse.mean())            # the failed run counts
+    assert row["pos_rmse_all"] > 1.5 > 0.5 > row["pos_rmse"]
+    table = C.format_table([row])
+    assert "all runs" in table and "successes" in table and "NEES in 95% band" in table
+
+
+def test_rate_tolerance_covers_binomial_scatter_at_its_stated_level():
+    # 3 standard errors (+1 run) must cover nearly every count drawn at the true rate, and
+    # a tolerance without the square root (or without 1/n) would not
+    rng = np.random.default_rng(0)
+    for p, n in [(0.3, 50), (0.05, 50), (0.8, 20)]:
+        k = rng.binomial(n, p, size=20000)
+        outside = np.mean(np.abs(k / n - p) > C.rate_tolerance(n, p))
+        assert outside < 0.01, (p, n, outside)
+        assert np.mean(np.abs(k / n - p) > 3 * np.sqrt(p * (1 - p) / n) / 4) > 0.05  # a quarter of it would not
+    assert C.rate_tolerance(50, 0.0) == pytest.approx(0.02)
+    with pytest.raises(ValueError, match="rate must lie"):
+        C.rate_tolerance(50, 1.5)
+    with pytest.raises(ValueError, match="n"):
+        C.rate_tolerance(0)
+
+
+def test_rates_differ_is_a_significance_test_of_two_proportions():
+    assert C.rates_differ(0.8, 0.08, 50) and not C.rates_differ(0.08, 0.8, 50)
+    assert not C.rates_differ(0.0, 0.0, 50) and not C.rates_differ(0.1, 0.02, 50)
+    # false-positive rate at equal true rates stays below ~1% (z = 3)
+    rng = np.random.default_rng(1)
+    a, b = rng.binomial(50, 0.3, 5000) / 50, rng.binomial(50, 0.3, 5000) / 50
+    assert np.mean([C.rates_differ(x, y, 50) for x, y in zip(a, b)]) < 0.01
