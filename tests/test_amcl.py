@@ -235,3 +235,20 @@ def test_help_shows_the_mapping_table(capsys):
     assert status == 0
     for line in ("pf_err, pf_z / kld_err, kld_z", "recovery_alpha_slow, recovery_alpha_fast", "--amcl-params"):
         assert line in out
+
+
+def test_cli_wires_kld_and_augmented_mcl(sim_files, tmp_path):
+    map_path, log_path = sim_files
+    params = tmp_path / "ros1.yaml"
+    params.write_text("odom_model_type: diff-corrected\nodom_alpha1: 0.05\nodom_alpha2: 0.01\nodom_alpha3: 0.02\n"
+                      "odom_alpha4: 0.05\nmin_particles: 200\nmax_particles: 1500\nkld_err: 0.05\n"
+                      "recovery_alpha_slow: 0.001\nrecovery_alpha_fast: 0.1\nlaser_model_type: beam\n"
+                      "selective_resampling: true\n")
+    status, _, err = run_cli("run", "--map", map_path, "--log", log_path, "--amcl-params", params, "--quiet",
+                             "--out", tmp_path / "o")
+    assert status == 0, err
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    s = summary["settings"]
+    assert s["augmented"] == [0.001, 0.1] and s["kld"]["n_min"] == 200 and s["kld"]["n_max"] == 1500
+    assert s["sensor"] == "beam" and s["resample_threshold"] == 0.5 and s["beams"] == 30  # ROS 1 default
+    assert summary["particles"] == 1500 and s["amcl_params"]["dialect"] == "ros1"

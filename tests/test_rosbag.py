@@ -232,15 +232,24 @@ def test_hand_made_bag_interpolates_odometry_and_reads_invalid_readings(tmp_path
     r = np.full(ANGLES.size, 3.0)
     r[:4] = [np.nan, np.inf, -np.inf, 0.05]  # invalid, no return, too close, below range_min
     r[4] = 12.0  # above range_max
-    msgs = [("/odom", ODOM_T, 0.9, _odom(0.9, 0.0, 0.0, 3.0)), ("/odom", ODOM_T, 1.9, _odom(1.9, 1.0, 0.5, -3.0)),
+    msgs = [("/scan", SCAN_T, 0.5, _scan(0.5, r, frame="base_link")),  # before the odometry starts: dropped
+            ("/odom", ODOM_T, 0.9, _odom(0.9, 0.0, 0.0, 3.0)), ("/odom", ODOM_T, 1.9, _odom(1.9, 1.0, 0.5, -3.0)),
             ("/scan", SCAN_T, 1.15, _scan(1.15, r, frame="base_link"))]
-    log = io.read_rosbag(_write(tmp_path / "a.bag", msgs))
-    assert len(log) == 1 and log.max_range == 10.0
+    bag = _write(tmp_path / "a.bag", msgs)
+    log = io.read_rosbag(bag)
+    assert log.skipped == {"scans outside the odometry's time span": 1}
+    assert len(log) == 1 and log.max_range == 10.0 and log.times[0] == 1.15
     assert np.array_equal(log.ranges[0, :5], np.full(5, 10.0)) and log.ranges[0, 5] == 3.0
     assert log.meta["invalid_readings"] == 5
     # a quarter of the way from 0.9 s to 1.9 s; the heading crosses +-pi the short way
     assert np.allclose(log.odometry[0], [0.25, 0.125, 3.0 + 0.25 * (2 * np.pi - 6.0)], atol=1e-12)
     assert np.allclose(log.angles, ANGLES, atol=1e-7) and np.allclose(log.sensor_offset, 0)
+    # the CLI says which scans it dropped; --min-range turns short readings into "no return"
+    args = cli.build_parser().parse_args(["run", "--log", str(bag), "--build-map", "--min-range", "3.5"])
+    err = stdio.StringIO()
+    log2 = cli._load(args, err)
+    assert "skipped 1 scans outside the odometry's time span" in err.getvalue()
+    assert np.all(log2.ranges[0] == 10.0)
 
 
 def test_laser_chain_upside_down_mount_and_odometry_on_tf(tmp_path):
@@ -269,6 +278,12 @@ def test_laser_chain_upside_down_mount_and_odometry_on_tf(tmp_path):
     bag = _write(tmp_path / "chain.bag", msgs)
     log = io.read_rosbag(bag)
     assert log.meta["odometry"] == "/tf transform odom -> base_footprint"
+    # with an Odometry topic too, that is the default, and --odom-topic /tf picks the transform
+    wheel = [("/wheel/odom", ODOM_T, 1.0 + 0.5 * k, _odom(1.0 + 0.5 * k, -1.0 * k, 0.0, 0.0)) for k in range(4)]
+    wheel = [(t, ty, s, replace(m, child_frame_id="base_footprint")) for t, ty, s, m in wheel]
+    bag2 = _write(tmp_path / "both.bag", msgs + wheel)
+    assert np.allclose(io.read_rosbag(bag2).odometry[:, 0], [0.0, -1.0, -2.0, -3.0])
+    assert np.allclose(io.read_rosbag(bag2, odom_topic="/tf").odometry[:, 0], [0.0, 0.2, 0.4, 0.6])
     assert np.allclose(log.sensor_offset, [0.3, 0.05, 0.0], atol=1e-12)
     assert "upside down" in log.meta["sensor_offset_source"]
     # mirrored: the beam that pointed at angle a now points at -a, order kept increasing
@@ -346,3 +361,22 @@ def test_topic_options_are_for_bags_only(tmp_path):
     log.write_text("ODOM 0 0 0 0 0 0 0 h 0\n")
     status, _, err = run_cli("run", "--build-map", "--log", log, "--scan-topic", "/scan", "--out", tmp_path / "o")
     assert status == 2 and "--scan-topic and --odom-topic apply to ROS bags only" in err
+
+
+@pytest.mark.parametrize("version", [1, 2])
+@pytest.mark.parametrize("frame, n", [("map", 3), ("world", 1), ("m", 0), ("a_long_frame", 2)])
+def test_particle_cloud_bytes_equal_rosbags_serializer(version, frame, n):
+    ts = get_typestore(Stores.ROS1_NOETIC if version == 1 else Stores.ROS2_HUMBLE)
+    poses = np.random.default_rng(n).normal(size=(n, 3))
+    t_ns = 1_700_000_123_456_789_012
+    ty = ts.types
+    T, H = ty["builtin_interfaces/msg/Time"], ty["std_msgs/msg/Header"]
+    stamp = T(sec=t_ns // 10**9, nanosec=t_ns % 10**9)
+    hdr = H(seq=0, stamp=stamp, frame_id=frame) if version == 1 else H(stamp=stamp, frame_id=frame)
+    P, Q, Pose = ty["geometry_msgs/msg/Point"], ty["geometry_msgs/msg/Quaternion"], ty["geometry_msgs/msg/Pose"]
+    q = rosbag.yaw_to_quaternion(poses[:, 2]) if n else np.zeros((0, 4))
+    msg = ty["geometry_msgs/msg/PoseArray"](header=hdr, poses=[
+        Pose(position=P(x=float(a[0]), y=float(a[1]), z=0.0), orientation=Q(x=0.0, y=0.0, z=float(b[2]), w=float(b[3])))
+        for a, b in zip(poses, q)])
+    want = ts.serialize_ros1(msg, msg.__msgtype__) if version == 1 else ts.serialize_cdr(msg, msg.__msgtype__)
+    assert rosbag._pose_array_bytes(version, t_ns, frame, poses) == bytes(want)
