@@ -42,7 +42,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,6 +50,10 @@ from numpy.typing import ArrayLike, NDArray
 from .geometry import relative
 from .grid import OccupancyGrid
 from .mcl import ReversibleOdometry  # re-exported: it lived here before moving next to OdometryMotion
+
+if TYPE_CHECKING:
+    from .kld import KLDSampling
+    from .mcl import Augmented
 
 __all__ = ["main", "build_parser", "RunResult", "localize_log", "make_sensor", "Progress", "ReversibleOdometry",
            "converged_at"]
@@ -199,8 +203,8 @@ def localize_log(
     snapshot_particles: int = 1000,
     progress: Progress | None = None,
     sensor_params: dict | None = None,
-    kld=None,
-    augmented=None,
+    kld: KLDSampling | None = None,
+    augmented: Augmented | None = None,
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
