@@ -380,3 +380,20 @@ def test_particle_cloud_bytes_equal_rosbags_serializer(version, frame, n):
         for a, b in zip(poses, q)])
     want = ts.serialize_ros1(msg, msg.__msgtype__) if version == 1 else ts.serialize_cdr(msg, msg.__msgtype__)
     assert rosbag._pose_array_bytes(version, t_ns, frame, poses) == bytes(want)
+
+
+@pytest.mark.data
+def test_evo_reads_the_tum_output_and_agrees_on_the_ape(carmen_run):
+    """With evo installed (it is not part of the test extra: it pulls in pandas and seaborn)."""
+    evo_fi = pytest.importorskip("evo.tools.file_interface")
+    from evo.core import metrics
+
+    est = evo_fi.read_tum_trajectory_file(str(carmen_run / "trajectory.tum"))
+    ref = evo_fi.read_tum_trajectory_file(str(carmen_run / "reference.tum"))
+    ape = metrics.APE(metrics.PoseRelation.translation_part)
+    ape.process_data((ref, est))
+    _, rows = trajectory(carmen_run / "trajectory.csv")
+    ours = np.array([float(r["error"]) for r in rows])
+    assert len(ape.error) == N_SCANS
+    assert np.allclose(ape.error, ours, atol=1e-4)
+    assert ape.get_statistic(metrics.StatisticsType.rmse) == pytest.approx(np.sqrt(np.mean(ours**2)), abs=1e-4)
