@@ -22,6 +22,14 @@ model, resample. It writes
 
 ``map`` builds an occupancy grid map from a log with known (corrected) poses
 and writes it as a ROS ``map_server`` map (YAML + PGM).
+
+``run`` also reads ROS bags (``--log robot.bag`` or a ROS 2 bag folder, see
+:mod:`localize.io.rosbag`) and AMCL parameter files (``--amcl-params``, see
+:mod:`localize.amcl`), and writes ``DIR/trajectory.tum`` (and
+``DIR/reference.tum`` for logs with reference poses) for ``evo``; for a bag, also
+``DIR/localization.bag`` (ROS 1) or ``DIR/localization_bag/`` (ROS 2) with
+``/amcl_pose`` and the particle cloud. ``demo`` simulates a log in a built-in
+world and localizes it: a first run that needs no download.
 """
 
 from __future__ import annotations
@@ -34,7 +42,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,11 +51,22 @@ from .geometry import relative
 from .grid import OccupancyGrid
 from .mcl import ReversibleOdometry  # re-exported: it lived here before moving next to OdometryMotion
 
+if TYPE_CHECKING:
+    from .kld import KLDSampling
+    from .mcl import Augmented
+
 __all__ = ["main", "build_parser", "RunResult", "localize_log", "make_sensor", "Progress", "ReversibleOdometry",
            "converged_at"]
 
 EXAMPLES = """\
 examples:
+  # no data at hand: simulate a robot in a built-in office, localize it, animate it
+  localize demo --out out/demo
+
+  # your robot: a ROS 1 bag or a ROS 2 bag folder, a map_server map, your AMCL parameters
+  localize run --map office.yaml --log robot.bag --amcl-params amcl.yaml --out out/robot
+  localize run --map office.yaml --log rosbag2_2024_05_01/ --scan-topic /front/scan --laser-pose 0.2 0 0
+
   # the CMU 16-831 homework data (Wean Hall): map in P(free), log in cm
   localize run --map wean.dat --log robotdata1.log --out out/wean
 
@@ -157,6 +176,7 @@ class RunResult:
     updated: NDArray[np.bool_]
     seconds: float
     snapshots: dict = field(default_factory=dict)
+    covariances: NDArray[np.float64] | None = None  # (K, 3, 3) of the particles, per scan
 
     @property
     def seconds_per_scan(self) -> float:
@@ -183,6 +203,8 @@ def localize_log(
     snapshot_particles: int = 1000,
     progress: Progress | None = None,
     sensor_params: dict | None = None,
+    kld: KLDSampling | None = None,
+    augmented: Augmented | None = None,
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
@@ -232,6 +254,9 @@ def localize_log(
         Updated after each scan.
     sensor_params : dict, optional
         Extra keyword arguments of the sensor model.
+    kld, augmented : optional
+        KLD-sampling (:class:`~localize.kld.KLDSampling`) and augmented MCL
+        (:class:`~localize.mcl.Augmented`) settings of :class:`~localize.mcl.MCL`.
 
     Returns
     -------
@@ -250,7 +275,7 @@ def localize_log(
     ranges = np.minimum(log.ranges, mr)
     motion = ReversibleOdometry(alphas)
     opts: dict[str, Any] = dict(resample_threshold=resample_threshold, injection=injection,
-                                free_space_only=free_space_only)
+                                free_space_only=free_space_only, kld=kld, augmented=augmented)
     if init == "global":
         f = MCL.uniform(grid, n_particles, motion, model, rng=rng, **opts)
     else:
@@ -260,6 +285,7 @@ def localize_log(
     k_scans = len(log)
     est = np.zeros((k_scans, 3))
     spread = np.zeros(k_scans)
+    covs = np.zeros((k_scans, 3, 3))
     neff = np.zeros(k_scans)
     updated = np.zeros(k_scans, dtype=bool)
     snaps: dict = {}
@@ -280,6 +306,7 @@ def localize_log(
         updated[k] = do_update
         est[k] = e.pose if np.all(np.isfinite(e.pose)) else e.mean
         spread[k] = float(np.sqrt(e.cov[0, 0] + e.cov[1, 1]))
+        covs[k] = e.cov
         neff[k] = f.status.n_eff
         if snapshot_every and (k % snapshot_every == 0 or k == k_scans - 1):
             sub = np.linspace(0, f.n - 1, min(f.n, snapshot_particles)).astype(int)
@@ -288,7 +315,7 @@ def localize_log(
             progress.update(k + 1)
     seconds = time.perf_counter() - t0
     return RunResult(times=np.asarray(log.times), estimates=est, spread=spread, n_eff=neff, updated=updated,
-                     seconds=seconds, snapshots=snaps)
+                     seconds=seconds, snapshots=snaps, covariances=covs)
 
 
 # ============================================================================ outputs
@@ -448,7 +475,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="localize",
         description="Monte Carlo Localization on robot logs (CMU 16-831, CARMEN) and maps (CMU, ROS map_server).",
         epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = ap.add_subparsers(dest="command", metavar="{run,map}")
+    sub = ap.add_subparsers(dest="command", metavar="{run,map,demo}")
     sub.required = True
 
     run = sub.add_parser(
@@ -456,19 +483,36 @@ def build_parser() -> argparse.ArgumentParser:
         description="Global localization with Monte Carlo Localization: particles start uniform over the map's "
                     "free space and are moved by the log's odometry and weighted by its laser scans. Writes "
                     "DIR/trajectory.csv (time,x,y,theta per scan, map frame, metres and radians), "
-                    "DIR/summary.json and, with --animate, DIR/particles.gif.",
-        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "DIR/summary.json, DIR/trajectory.tum (for evo) and, with --animate, DIR/particles.gif; for a "
+                    "ROS bag also DIR/localization.bag (ROS 1) or DIR/localization_bag/ (ROS 2) with /amcl_pose "
+                    "and the particle cloud.",
+        epilog=EXAMPLES + "\nAMCL parameters (--amcl-params FILE.yaml), ROS 1 amcl or nav2 nav2_amcl:\n" + _amcl_table(),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = run.add_argument_group("input")
     g.add_argument("--map", type=Path, metavar="FILE",
                    help="the map: a CMU 16-831 map (wean.dat) or a ROS map_server YAML. "
                         "Example: --map wean.dat")
     g.add_argument("--log", type=Path, metavar="FILE", required=True,
-                   help="the log: CMU 16-831 (O/L records, cm) or CARMEN (FLASER/ODOM ..., may be gzipped). "
-                        "Example: --log robotdata1.log")
+                   help="the log: CMU 16-831 (O/L records, cm), CARMEN (FLASER/ODOM ..., may be gzipped), a ROS 1 "
+                        "bag or a ROS 2 bag folder (sqlite3 or MCAP; needs pip install \"localize[ros]\"). "
+                        "Example: --log robotdata1.log or --log robot.bag")
     g.add_argument("--map-format", choices=["cmu", "ros"], default=None,
                    help="override the map format detected from the file's content. Example: --map-format ros")
-    g.add_argument("--log-format", choices=["cmu", "carmen"], default=None,
+    g.add_argument("--log-format", choices=["cmu", "carmen", "rosbag"], default=None,
                    help="override the log format detected from the file's content. Example: --log-format carmen")
+    g.add_argument("--scan-topic", metavar="TOPIC", default=None,
+                   help="ROS bags: the sensor_msgs/LaserScan topic (needed when the bag has several). "
+                        "Example: --scan-topic /front/scan")
+    g.add_argument("--odom-topic", metavar="TOPIC", default=None,
+                   help="ROS bags: the nav_msgs/Odometry topic (default: the bag's one, else the odom -> base "
+                        "transform on /tf; --odom-topic /tf forces the latter). Example: --odom-topic /wheel/odom")
+    g.add_argument("--laser-pose", type=float, nargs=3, default=None, metavar=("X", "Y", "YAW"),
+                   help="the laser's mounting pose in the robot frame, metres and radians; overrides the log's "
+                        "(a bag's /tf_static, CMU's 25 cm ahead). Needed for a bag without /tf_static. "
+                        "Example: --laser-pose 0.2 0 0")
+    g.add_argument("--amcl-params", type=Path, default=None, metavar="FILE.yaml",
+                   help="take the filter settings from a ROS 1 amcl or nav2 AMCL parameter file (the mapping is "
+                        "printed; options given on the command line win). Example: --amcl-params nav2_params.yaml")
     g.add_argument("--build-map", action="store_true",
                    help="instead of --map, build the map from the log's reference (corrected) poses, as CARMEN "
                         "corrected logs carry them. Example: --build-map --resolution 0.05")
@@ -493,6 +537,9 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--max-range", type=_positive_float, default=30.0, metavar="M",
                    help="sensor model's maximum range in metres; longer readings count as 'no return' "
                         "(default 30). Example: --max-range 20")
+    f.add_argument("--min-range", type=_nonneg_float, default=None, metavar="M",
+                   help="readings shorter than M metres count as 'no return' (AMCL's laser_min_range; default: "
+                        "none, a bag's range_min always applies). Example: --min-range 0.1")
     f.add_argument("--alphas", type=_nonneg_float, nargs=4, default=(0.05, 0.01, 0.02, 0.05),
                    metavar=("A1", "A2", "A3", "A4"),
                    help="odometry noise alpha1..alpha4 of Probabilistic Robotics table 5.6, as variances "
@@ -540,15 +587,121 @@ def build_parser() -> argparse.ArgumentParser:
     mp.add_argument("--every", type=_positive_int, default=1, metavar="K",
                     help="use every K-th scan (default 1). Example: --every 4")
     mp.add_argument("--quiet", action="store_true", help="print nothing.")
+
+    dm = sub.add_parser(
+        "demo", help="simulate a robot in a built-in world and localize it (no download needed)",
+        description="A first run without data: simulates a robot driving through a built-in office (laser with "
+                    "realistic noise, unmapped clutter, an imperfect map: walls off by a few centimetres, a moved "
+                    "cupboard), writes the log and map as CMU 16-831 files (DIR/robot.log, DIR/map.dat) and the "
+                    "true poses (DIR/truth.tum), then runs `localize run` on them with an animation. "
+                    "Rerun or vary it with the printed command.",
+        epilog="example:\n  localize demo --out out/demo\n  evo_ape tum out/demo/truth.tum out/demo/trajectory.tum",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    dm.add_argument("--out", type=Path, default=Path("localize-demo"), metavar="DIR",
+                    help="output folder (default ./localize-demo). Example: --out out/demo")
+    dm.add_argument("--seed", type=int, default=0, metavar="S",
+                    help="seed of the simulation and of the filter (default 0). Example: --seed 3")
+    dm.add_argument("--steps", type=_positive_int, default=150, metavar="K",
+                    help="number of scans to simulate (default 150). Example: --steps 300")
+    dm.add_argument("--particles", type=_positive_int, default=5000, metavar="N",
+                    help="number of particles (default 5000). Example: --particles 10000")
+    dm.add_argument("--frames", type=_positive_int, default=60, metavar="K",
+                    help="number of animation frames (default 60). Example: --frames 100")
+    dm.add_argument("--no-animate", action="store_true", help="skip the animation (faster).")
+    dm.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal.")
+    run.set_defaults(_option_dests={s: a.dest for a in run._actions for s in a.option_strings})
     return ap
+
+
+def _amcl_table() -> str:
+    from .amcl import MAPPING_TABLE
+
+    return "\n".join("  " + line for line in MAPPING_TABLE.splitlines())
+
+
+def _given_options(args, argv: Sequence[str]) -> set[str]:
+    """Destinations of the options written on the command line (unique prefixes count, as in argparse)."""
+    opts: dict[str, str] = getattr(args, "_option_dests", {})
+    given = set()
+    for tok in argv:
+        if tok == "--":
+            break
+        if not tok.startswith("--"):
+            continue
+        name = tok.split("=", 1)[0]
+        if name in opts:
+            given.add(opts[name])
+            continue
+        hits = {d for o, d in opts.items() if o.startswith(name)}
+        if len(hits) == 1:
+            given |= hits
+    return given
 
 
 # ============================================================================ main
 def _load(args, err: TextIO):
-    from . import io as lio
+    from dataclasses import replace
 
-    log = lio.read_log(args.log, format=args.log_format)
+    from . import io as lio
+    from .io import rosbag
+
+    pose = getattr(args, "laser_pose", None)
+    if args.log_format == "rosbag" or (args.log_format is None and rosbag.is_rosbag(args.log)):
+        log = rosbag.read_rosbag(args.log, scan_topic=getattr(args, "scan_topic", None),
+                                 odom_topic=getattr(args, "odom_topic", None), laser_pose=pose)
+        if log.skipped:
+            print(f"localize: warning: {args.log}: skipped " + "; ".join(f"{n} {k}" for k, n in log.skipped.items()),
+                  file=err)
+    else:
+        if getattr(args, "scan_topic", None) or getattr(args, "odom_topic", None):
+            raise ValueError("--scan-topic and --odom-topic apply to ROS bags only")
+        log = lio.read_log(args.log, format=args.log_format)
+        if pose is not None:
+            log = replace(log, sensor_offset=np.asarray(pose, dtype=float),
+                          meta={**log.meta, "sensor_offset_source": "given (--laser-pose)"})
+    min_range = getattr(args, "min_range", None)
+    if min_range:
+        r = np.array(log.ranges, copy=True)
+        r[r < min_range] = log.max_range
+        log = replace(log, ranges=r, meta={**log.meta, "min_range": min_range})
     return log
+
+
+def _apply_amcl(args, out: TextIO, err: TextIO) -> dict:
+    """Read --amcl-params into ``args`` (options written on the command line win); return the run's extras."""
+    extras: dict[str, Any] = {"sensor_params": {}, "kld": None, "augmented": None, "resample_threshold": 0.5}
+    if args.amcl_params is None:
+        return extras
+    from .amcl import read_amcl_params
+
+    m = read_amcl_params(args.amcl_params)
+    st = m.settings
+    given = _given_options(args, getattr(args, "_argv", []))
+    kept = []
+    for dest in ("particles", "alphas", "sensor", "beams", "max_range", "min_range", "sigma_hit", "min_motion"):
+        if dest in given:
+            kept.append(dest)
+        else:
+            setattr(args, dest, st[dest])
+    if args.sensor == st["sensor"]:
+        extras["sensor_params"] = dict(st["sensor_params"])
+    extras.update(kld=st["kld"], augmented=st["augmented"], resample_threshold=st["resample_threshold"])
+    if not args.quiet:
+        print(m.table(), file=out)
+        if kept:
+            print("  command-line options kept: " + ", ".join("--" + d.replace("_", "-") for d in kept), file=out)
+    for w in m.warnings():
+        print(f"localize: warning: {w}", file=err)
+    extras["mapping"] = {"file": str(args.amcl_params), "dialect": m.dialect,
+                         "mapped": [{"parameter": r[0], "value": _jsonable(r[1]), "setting": r[2]} for r in m.rows],
+                         "ignored": [r[0] for r in m.ignored], "command_line_kept": kept}
+    return extras
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, tuple):
+        return [_jsonable(x) for x in v]
+    return v if isinstance(v, (int, float, str, bool)) or v is None else str(v)
 
 
 def _cmd_map(args, out: TextIO) -> int:
@@ -576,6 +729,7 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
         raise ValueError("give --map FILE, or --build-map to build the map from the log's corrected poses")
     if args.map is not None and args.build_map:
         raise ValueError("give either --map or --build-map, not both")
+    extras = _apply_amcl(args, out, err)
     log = _load(args, err)
     if args.scans is not None:
         log = log.select(args.scans)
@@ -594,17 +748,20 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
     t_read = time.perf_counter() - t_start
     quiet = args.quiet
     progress = Progress(len(log), stream=err, enabled=None if not quiet else False)
-    frames = max(1, int(np.ceil(len(log) / args.frames))) if args.animate else 0
+    is_bag = log.format in lio.BAG_FORMATS
+    frames = max(1, int(np.ceil(len(log) / args.frames))) if args.animate or is_bag else 0
     rng = np.random.default_rng(args.seed)
     res = localize_log(
         grid, log, n_particles=args.particles, rng=rng, sensor=args.sensor, alphas=tuple(args.alphas),
         beams=args.beams, max_range=args.max_range, init="reference" if args.track else "global",
         min_motion=tuple(args.min_motion), injection=args.injection, snapshot_every=frames, temper=args.temper,
-        progress=progress, sensor_params={"sigma_hit": args.sigma_hit})
+        progress=progress, sensor_params={**extras["sensor_params"], "sigma_hit": args.sigma_hit},
+        resample_threshold=extras["resample_threshold"], kld=extras["kld"], augmented=extras["augmented"])
     progress.close()
     args.out.mkdir(parents=True, exist_ok=True)
     ref = log.poses
     write_trajectory(args.out / "trajectory.csv", res, ref)
+    outputs = _write_standard_outputs(args.out, res, log, err)
     settings = {
         "map": map_desc, "log": str(args.log), "log_format": log.format, "seed": args.seed,
         "sensor": args.sensor, "beams": min(args.beams, log.n_beams), "max_range": args.max_range,
@@ -612,8 +769,20 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
         "min_motion": list(args.min_motion),
         "injection": args.injection, "init": "reference" if args.track else "global",
         "scans": None if args.scans is None else [args.scans.start, args.scans.stop, args.scans.step],
+        "laser_pose": [round(float(v), 6) for v in log.sensor_offset], "min_range": args.min_range,
+        "resample_threshold": extras["resample_threshold"],
+        "kld": None if extras["kld"] is None else {"epsilon": extras["kld"].epsilon, "delta": extras["kld"].delta,
+                                                     "n_min": extras["kld"].n_min, "n_max": extras["kld"].n_max},
+        "augmented": None if extras["augmented"] is None else [extras["augmented"].alpha_slow,
+                                                                 extras["augmented"].alpha_fast],
     }
+    if "mapping" in extras:
+        settings["amcl_params"] = extras["mapping"]
+    if is_bag:
+        settings["bag"] = {k: log.meta.get(k) for k in ("scan_topic", "odom_topic", "odometry", "scan_frame",
+                                                         "base_frame", "sensor_offset_source")}
     summary = summarize(res, log, args.particles, ref, settings)
+    summary["outputs"] = ["trajectory.csv", *outputs, "summary.json"]
     total = time.perf_counter() - t_start
     summary["seconds_reading_files"] = round(t_read, 3)
     summary["seconds_total"] = round(total, 3)
@@ -634,9 +803,74 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
         if ref is not None:
             lines.append(f"against the log's reference poses: converged at scan "
                          f"{summary['convergence_step_reference']}, median error {summary['median_error_m']} m")
-        lines.append(f"wrote {args.out / 'trajectory.csv'} and {args.out / 'summary.json'}")
+        lines.append(f"wrote {args.out / 'trajectory.csv'}, {', '.join(str(args.out / o) for o in outputs)} and "
+                     f"{args.out / 'summary.json'}")
         print("\n".join(lines), file=out)
     return 0
+
+
+def _cmd_demo(args, out: TextIO, err: TextIO) -> int:
+    from .demo import make_demo
+    from .io.tum import read_tum
+
+    quiet = args.quiet
+    rng = np.random.default_rng(args.seed)
+    d = make_demo(args.out, rng, steps=args.steps)
+    argv = ["run", "--map", str(d.map_path), "--log", str(d.log_path), "--out", str(args.out),
+            "--particles", str(args.particles), "--seed", str(args.seed), "--frames", str(args.frames)]
+    if not args.no_animate:
+        argv.append("--animate")
+    if quiet:
+        argv.append("--quiet")
+    if not quiet:
+        print(f"simulated {args.steps} scans of a robot in the built-in office (map with a moved cupboard, walls "
+              f"drawn at another resolution, unmapped clutter): wrote {d.map_path}, {d.log_path}, {d.truth_path}",
+              file=out)
+        print("localizing: localize " + " ".join(argv), file=out)
+    run_args = build_parser().parse_args(argv)
+    run_args._argv = argv
+    code = _cmd_run(run_args, out, err)
+    _, est = read_tum(args.out / "trajectory.tum")
+    e = np.hypot(*(est[:, :2] - d.poses[:, :2]).T)
+    cs = converged_at(e, 0.5, 20)
+    score = {"truth": d.truth_path.name, "convergence_step_truth": cs,
+             "median_error_after_convergence_m": None if cs is None else round(float(np.median(e[cs:])), 3),
+             "final_error_m": round(float(e[-1]), 3)}
+    summary_path = args.out / "summary.json"
+    summary = json.loads(summary_path.read_text())
+    summary["demo"] = score
+    summary_path.write_text(json.dumps(summary, indent=2))
+    if not quiet:
+        med = score["median_error_after_convergence_m"]
+        print(f"against the true poses: within 0.5 m from scan {cs}" + (f", median error {med} m after that"
+                                                                           if med is not None else "")
+              + f", final error {score['final_error_m']} m", file=out)
+        print(f"compare with evo: evo_ape tum {args.out / 'truth.tum'} {args.out / 'trajectory.tum'}", file=out)
+    return code
+
+
+def _write_standard_outputs(out_dir: Path, res: RunResult, log, err: TextIO) -> list[str]:
+    """trajectory.tum (+ reference.tum) for evo; for a bag input the result bag. Returns the names written."""
+    from .io import rosbag
+    from .io.tum import write_tum
+
+    names = []
+    write_tum(out_dir / "trajectory.tum", res.times, res.estimates,
+              comment=f"localize estimate (map frame) for {log.source}\ntimestamp x y z qx qy qz qw")
+    names.append("trajectory.tum")
+    if log.poses is not None:
+        write_tum(out_dir / "reference.tum", res.times, log.poses,
+                  comment=f"reference poses of {log.source}\ntimestamp x y z qx qy qz qw")
+        names.append("reference.tum")
+    if len(res.times) > 1 and np.any(np.diff(res.times) <= 0):
+        print("localize: warning: the log's time stamps do not increase everywhere; evo may refuse "
+              "trajectory.tum", file=err)
+    if log.format in rosbag.BAG_FORMATS:
+        name = "localization.bag" if log.format == "rosbag1" else "localization_bag"
+        clouds = {k: p for k, (p, _w) in res.snapshots.items()}
+        rosbag.write_result_bag(out_dir / name, res.times, res.estimates, res.covariances, clouds, storage=log.format)
+        names.append(name)
+    return names
 
 
 def main(argv: Sequence[str] | None = None, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
@@ -661,11 +895,14 @@ def main(argv: Sequence[str] | None = None, stdout: TextIO | None = None, stderr
         args = parser.parse_args(argv)
     except SystemExit as e:  # argparse already printed usage / help
         return int(e.code or 0)
+    args._argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if args.command == "map":
             return _cmd_map(args, out)
+        if args.command == "demo":
+            return _cmd_demo(args, out, err)
         return _cmd_run(args, out, err)
-    except (ValueError, TypeError, OSError) as e:
+    except (ValueError, TypeError, OSError, ImportError) as e:
         print(f"localize: error: {e}", file=err)
         return 2
     except KeyboardInterrupt:  # pragma: no cover
