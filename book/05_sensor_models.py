@@ -194,7 +194,9 @@ z_exact = cast(rmap, r_poses, r_angles, 6.0, method="exact")
 z_march = cast(rmap, r_poses, r_angles, 6.0, method="march")
 z_lut = cast(rmap, r_poses, r_angles, 6.0, method="lut", n_bins=360)
 err_march, err_lut = np.abs(z_march - z_exact), np.abs(z_lut - z_exact)
-print(f"march: max |error| {err_march.max():.1e} m, within one cell on {np.mean(err_march <= 0.1):.2%} of rays")
+# the marcher's error is pure round-off (~1e-14 m, digits that differ between CPUs): print its bound
+print(f"march: max |error| below 1e-9 m: {err_march.max() < 1e-9}, within one cell on "
+      f"{np.mean(err_march <= 0.1):.2%} of rays")
 bound = 2 * rmap.resolution + z_exact * np.pi / 360
 print(f"lut:   within 2 cells + r*pi/n_bins on {np.mean(err_lut <= bound):.2%} of rays, "
       f"median error {np.median(err_lut) * 100:.1f} cm, worst {err_lut.max():.2f} m")
@@ -713,7 +715,8 @@ ex_map = maps.random_rooms((80, 80), 0.1, np.random.default_rng(3), n_boxes=20)
 ex_poses = ex_map.sample_free(2000, np.random.default_rng(4))
 plain = np.array([plain_march(ex_map, *p, 6.0) for p in ex_poses])
 exact_r = np.array([cast_ray(ex_map, *p, 6.0) for p in ex_poses])
-print(f"plain marcher off by more than one cell on {np.mean(np.abs(plain - exact_r) > 0.1):.1%} of rays")
+# whole per cent: a ray that grazes a cell corner may count on one CPU and not on another
+print(f"plain marcher off by more than one cell on {np.mean(np.abs(plain - exact_r) > 0.1):.0%} of rays")
 
 # %% [markdown] tags=["solution"]
 # ````{admonition} Solution
