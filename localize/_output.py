@@ -96,6 +96,9 @@ class RunOutput:
         self._lock_fd: int | None = None
         self._created: list[Path] = []
         self._committed = False
+        self.interrupted = False
+        self._old_handler = None
+        self._old_hook = sys.unraisablehook
 
     # ------------------------------------------------------------ open / close
     def __enter__(self) -> "RunOutput":
@@ -128,6 +131,7 @@ class RunOutput:
             probe = stage / ".probe"
             probe.write_bytes(b"")
             probe.unlink()
+            self._watch_sigint()
         except OSError as exc:
             self.close()
             raise ValueError(f"{where}: cannot write into the output folder ({exc.strerror or exc})") from None
@@ -155,6 +159,7 @@ class RunOutput:
         if self.stage is not None and self.stage.exists():
             shutil.rmtree(self.stage, ignore_errors=True)
         self.stage = None
+        self._unwatch_sigint()
         self._unlock()
         if not self._committed:
             for d in reversed(self._created):  # innermost first; only while empty
@@ -163,6 +168,45 @@ class RunOutput:
                 except OSError:
                     break
         self._created = []
+
+    # ------------------------------------------------------------ Ctrl-C
+    def _watch_sigint(self) -> None:
+        """Remember any Ctrl-C, then raise KeyboardInterrupt as usual.
+
+        Python drops a KeyboardInterrupt raised inside a finalizer or weakref
+        callback ("Exception ignored in ..."; matplotlib's animation writers
+        run many), and the run would carry on; :meth:`commit` refuses to
+        publish a run that saw a Ctrl-C.
+        """
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return
+        previous = signal.getsignal(signal.SIGINT)
+        if previous in (signal.SIG_IGN, None):  # Ctrl-C ignored (a background job) or not set from Python
+            return
+
+        def handler(signum, frame):
+            self.interrupted = True
+            if callable(previous):
+                previous(signum, frame)
+            raise KeyboardInterrupt
+
+        hook = sys.unraisablehook
+
+        def unraisable(info):  # the swallowed Ctrl-C is remembered: no "Exception ignored" traceback
+            if not isinstance(info.exc_value, KeyboardInterrupt):
+                hook(info)
+
+        self._old_handler, self._old_hook = previous, hook
+        signal.signal(signal.SIGINT, handler)
+        sys.unraisablehook = unraisable
+
+    def _unwatch_sigint(self) -> None:
+        if self._old_handler is not None:
+            signal.signal(signal.SIGINT, self._old_handler)
+            sys.unraisablehook = self._old_hook
+            self._old_handler = None
 
     # ------------------------------------------------------------ the lock
     def _lock(self) -> None:
@@ -225,6 +269,8 @@ class RunOutput:
             raise RuntimeError(f"commit() before {self.last} was written")
         blocked = _block_sigint()
         try:
+            if self.interrupted:  # a Ctrl-C that Python swallowed somewhere: the run is not complete
+                raise KeyboardInterrupt
             removed = []
             marker = self.folder / self.last
             if marker.exists():  # first: the folder stops claiming a complete run

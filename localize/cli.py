@@ -404,15 +404,36 @@ def write_animation(out_dir: Path, grid: OccupancyGrid, res: RunResult, referenc
     anim = animate_snapshots(grid, res.snapshots, true_poses=reference, estimates=res.estimates,
                              figsize=(6.0, max(3.0, min(8.0, 6.0 * aspect))), size=2.0)
     written = []
-    gif = out_dir / "particles.gif"
-    anim.save(gif, writer=PillowWriter(fps=fps), dpi=80)
-    written.append(gif)
-    if shutil.which("ffmpeg"):
-        mp4 = out_dir / "particles.mp4"
-        anim.save(mp4, writer=FFMpegWriter(fps=fps), dpi=100)
-        written.append(mp4)
-    plt.close("all")
+    try:
+        gif = out_dir / "particles.gif"
+        _save_animation(anim, gif, PillowWriter(fps=fps), dpi=80)
+        written.append(gif)
+        if shutil.which("ffmpeg"):
+            mp4 = out_dir / "particles.mp4"
+            _save_animation(anim, mp4, FFMpegWriter(fps=fps), dpi=100)
+            written.append(mp4)
+    finally:
+        plt.close("all")
     return written
+
+
+def _save_animation(anim, path: Path, writer, dpi: int) -> None:
+    """``anim.save`` with Ctrl-C kept a KeyboardInterrupt and other failures an ``OSError`` naming the file.
+
+    (Interrupted before its first frame, matplotlib's writers end in an
+    ``IndexError`` raised while cleaning up, which would hide the interrupt.)
+    """
+    try:
+        anim.save(path, writer=writer, dpi=dpi)
+    except KeyboardInterrupt:
+        raise
+    except Exception as exc:
+        ctx = exc.__context__
+        while ctx is not None:
+            if isinstance(ctx, KeyboardInterrupt):
+                raise KeyboardInterrupt from None
+            ctx = ctx.__context__
+        raise OSError(f"{path.name}: could not write the animation ({type(exc).__name__}: {exc})") from exc
 
 
 # ============================================================================ argument parsing
@@ -631,17 +652,23 @@ def _check_free_space(grid: OccupancyGrid, where: str) -> None:
                          "thresholds (ROS maps: --not-free-is-occupied only adds obstacles)")
 
 
-def _cmd_map(args, out: TextIO) -> int:
+def _cmd_map(args, out: TextIO, err: TextIO | None = None) -> int:
     from . import io as lio
     from .mapping import map_from_log
 
-    log = _load(args, out)
+    if args.out.suffix.lower() not in (".yaml", ".yml"):
+        raise ValueError(f"--out {args.out}: the map's file name must end in .yaml (the PGM is written beside it)")
+    log = _load(args, out if err is None else err)
     if log.poses is None:
         raise ValueError(f"{args.log}: the log has no reference poses to build a map from "
                          "(CARMEN corrected logs have them)")
-    grid = map_from_log(log, resolution=args.resolution, every=args.every)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    path = lio.write_ros_map(args.out, grid)
+    names = (args.out.name, args.out.with_suffix(".pgm").name)
+    with RunOutput(args.out.parent, results=names, last=args.out.name) as dest:  # YAML and PGM appear together
+        dest.open()
+        grid = map_from_log(log, resolution=args.resolution, every=args.every)
+        lio.write_ros_map(dest.path(args.out.name), grid)
+        dest.commit()
+    path = args.out
     if not args.quiet:
         print(f"wrote {path} and {path.with_suffix('.pgm')}: {grid}", file=out)
     return 0
@@ -755,7 +782,7 @@ def main(argv: Sequence[str] | None = None, stdout: TextIO | None = None, stderr
         return int(e.code or 0)
     try:
         if args.command == "map":
-            return _cmd_map(args, out)
+            return _cmd_map(args, out, err)
         return _cmd_run(args, out, err)
     except (ValueError, TypeError, OSError) as e:
         print(f"localize: error: {e}", file=err)

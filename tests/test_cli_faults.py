@@ -70,6 +70,32 @@ def test_interrupted_animation_leaves_the_earlier_run_untouched(files, tmp_path,
     assert all((out / n).read_bytes() == b for n, b in before.items())
 
 
+def test_a_ctrl_c_that_python_swallows_still_stops_the_results(files, tmp_path, monkeypatch):
+    """matplotlib's writers run weakref callbacks; a KeyboardInterrupt raised in one is only printed."""
+    import signal
+
+    out = tmp_path / "o"
+    assert small(files, out, "--seed", 1)[0] == 0
+    before = {n: (out / n).read_bytes() for n in listing(out)}
+
+    class Finalizer:
+        def __del__(self):
+            signal.raise_signal(signal.SIGINT)  # the handler's KeyboardInterrupt is "ignored" in __del__
+
+    def animation(folder, *args, **kwargs):
+        Finalizer()  # dropped at once
+        (Path(folder) / "particles.gif").write_bytes(b"GIF89a")
+        return [Path(folder) / "particles.gif"]
+
+    monkeypatch.setattr(cli, "write_animation", animation)
+    hook = sys.unraisablehook
+    status, _, err = small(files, out, "--seed", 2, "--animate")
+    assert status == 130 and "nothing written" in err
+    assert listing(out) == sorted(before) and all((out / n).read_bytes() == b for n, b in before.items())
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler was restored
+    assert sys.unraisablehook is hook
+
+
 def test_a_failing_run_removes_the_folder_it_created(files, tmp_path, monkeypatch):
     out = tmp_path / "new" / "deeper"
 
@@ -288,3 +314,38 @@ def test_help_examples_are_the_readme_commands(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for c in commands:
         assert " ".join(c.split()) in text, c
+
+
+# ------------------------------------------------------------------ the map sub-command
+@pytest.fixture(scope="module")
+def corrected_log(tmp_path_factory):
+    grid = maps.office(0.1)
+    run = sim.range_run(grid, np.random.default_rng(8), n_steps=6, dt=0.5, angles=io.carmen_angles(181),
+                        max_range=12.0, sensor="ideal")
+    log = io.LaserLog(times=run.times, odometry=run.poses, ranges=run.ranges, angles=run.angles,
+                      max_range=run.max_range)
+    return io.write_carmen_log(tmp_path_factory.mktemp("map") / "sim.log", log)
+
+
+def test_map_writes_yaml_and_pgm_together_or_not_at_all(corrected_log, tmp_path, monkeypatch):
+    from localize import mapping
+
+    target = tmp_path / "maps" / "office.yaml"
+    assert run_cli("map", "--log", corrected_log, "--out", target, "--resolution", 0.2, "--quiet")[0] == 0
+    assert listing(target.parent) == ["office.pgm", "office.yaml"]
+    old = {p: p.read_bytes() for p in target.parent.iterdir()}
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(mapping, "map_from_log", interrupted)
+    status, _, err = run_cli("map", "--log", corrected_log, "--out", target, "--resolution", 0.1)
+    assert status == 130 and "nothing written" in err
+    assert {p: p.read_bytes() for p in target.parent.iterdir()} == old
+    status, _, err = run_cli("map", "--log", corrected_log, "--out", tmp_path / "new" / "office.yaml")
+    assert status == 130 and not (tmp_path / "new").exists()
+
+
+def test_map_out_must_be_a_yaml_name_checked_before_mapping(corrected_log, tmp_path):
+    status, _, err = run_cli("map", "--log", corrected_log, "--out", tmp_path / "office.pgm")
+    assert status == 2 and "must end in .yaml" in err and not list(tmp_path.iterdir())

@@ -381,7 +381,9 @@ def write_cmu_log(path: PathLike, log: LaserLog, decimals: int = 3) -> Path:
     records: list[tuple[float, int, str]] = []
     fmt = f"{{:.{decimals}f}}"
     for k in range(len(log)):
-        r = np.where(log.ranges[k] >= log.max_range, 8183.0, log.ranges[k] * 100.0)
+        # whole cm; a reading just below max_range must not round up to "no return"
+        below = np.minimum(np.round(log.ranges[k] * 100.0), np.ceil(log.max_range * 100.0) - 1.0)
+        r = np.where(log.ranges[k] >= log.max_range, 8183.0, below)
         o, lp = log.odometry[k], laser[k]
         head = (f"{fmt.format(o[0] * 100)} {fmt.format(o[1] * 100)} {o[2]:.6f} "
                 f"{fmt.format(lp[0] * 100)} {fmt.format(lp[1] * 100)} {lp[2]:.6f}")
