@@ -20,6 +20,14 @@ model, resample. It writes
   convergence step, and the settings used;
 * ``DIR/particles.gif`` (with ``--animate``; ``.mp4`` too when ``ffmpeg`` exists).
 
+``DIR`` always holds one complete run or none (:mod:`localize._output`): the
+files are written under temporary names and moved into place together when
+the run is complete, ``summary.json`` last (it lists the run's files);
+results of an earlier run that this one does not produce are removed; a second
+run on a folder being written is refused; ``DIR`` is checked before the
+filter starts, and a run that would not fit into memory is refused before it
+allocates (:mod:`localize._resources`).
+
 ``map`` builds an occupancy grid map from a log with known (corrected) poses
 and writes it as a ROS ``map_server`` map (YAML + PGM).
 """
@@ -739,6 +747,7 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput) -> int:
     if args.animate:
         files = write_animation(dest.stage, grid, res, ref)
         summary["animation"] = [p.name for p in files]
+    summary["files"] = ["trajectory.csv", *summary.get("animation", []), "summary.json"]
     write_summary(dest.path("summary.json"), summary)
     written, removed = dest.commit()
     if removed and not quiet:

@@ -118,6 +118,7 @@ def test_results_of_an_earlier_run_that_this_run_does_not_produce_are_removed(fi
     assert listing(out) == ["summary.json", "trajectory.csv"]
     assert f"removed particles.gif of an earlier run from {out}" in text
     assert "animation" not in json.loads((out / "summary.json").read_text())
+    assert json.loads((out / "summary.json").read_text())["files"] == ["trajectory.csv", "summary.json"]
 
 
 def test_a_second_run_on_a_folder_being_written_is_refused(files, tmp_path):
