@@ -4,7 +4,9 @@
 
 * **checked first**: :meth:`RunOutput.open` creates ``DIR`` and a staging
   folder inside it, so an unwritable ``--out`` is reported before minutes of
-  filtering (the command line calls it after reading the input files);
+  filtering (the command line calls it first, before reading the input
+  files; a folder it created is removed again if the run ends without
+  results);
 * **locked**: a lock file ``DIR/.localize.lock`` (an ``flock``, released by
   the kernel even if the run is killed; removed when the run ends) keeps a
   second run from writing the same folder; it is refused at its start with the
@@ -141,7 +143,8 @@ class RunOutput:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        if exc is not None and self.stage is not None and not self._committed:
+        staged = self.stage is not None and self.stage.is_dir() and any(self.stage.iterdir())
+        if exc is not None and not self._committed and (staged or isinstance(exc, KeyboardInterrupt)):
             kept = [n for n in self.results if (self.folder / n).exists()]
             state = (f"it still holds the earlier run's {', '.join(kept)}" if kept else "it holds no results")
             note = f"nothing written to {self.folder} ({state})"

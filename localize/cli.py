@@ -672,7 +672,7 @@ def _cmd_map(args, out: TextIO, err: TextIO | None = None) -> int:
                          "(CARMEN corrected logs have them)")
     names = (args.out.name, args.out.with_suffix(".pgm").name)
     with RunOutput(args.out.parent, results=names, last=args.out.name) as dest:  # YAML and PGM appear together
-        dest.open()
+        dest.open()  # checked before the mapping runs
         grid = map_from_log(log, resolution=args.resolution, every=args.every)
         lio.write_ros_map(dest.path(args.out.name), grid)
         dest.commit()
@@ -688,6 +688,7 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
     if args.map is not None and args.build_map:
         raise ValueError("give either --map or --build-map, not both")
     with RunOutput(args.out) as dest:  # the results appear in --out only when complete (localize._output)
+        dest.open()  # check that --out can be written, and lock it, before anything else
         return _run(args, out, err, dest)
 
 
@@ -716,7 +717,6 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput) -> int:
         map_desc = str(args.map)
     _check_free_space(grid, map_desc)
     check_memory(args.particles, min(args.beams, log.n_beams), args.sensor, n_cells=grid.data.size)  # before allocating
-    dest.open()  # check that --out can be written and lock it, before the filter runs
     t_read = time.perf_counter() - t_start
     quiet = args.quiet
     progress = Progress(len(log), stream=err, enabled=None if not quiet else False)

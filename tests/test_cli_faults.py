@@ -188,6 +188,13 @@ def test_an_impossible_out_is_reported_before_the_filter_runs(files, tmp_path, m
         assert err.startswith(f"localize: error: --out {out}: {message}"), err
 
 
+def test_bad_input_leaves_no_output_folder_behind(files, tmp_path):
+    out = tmp_path / "new" / "o"
+    status, _, err = run_cli("run", "--map", files[0], "--log", tmp_path / "missing.log", "--out", out)
+    assert status == 2 and err == f"localize: error: {tmp_path / 'missing.log'}: no such file\n"
+    assert not (tmp_path / "new").exists()
+
+
 @pytest.mark.skipif(not hasattr(sys, "getuid") or sys.getuid() == 0, reason="root may write anywhere")
 def test_an_unwritable_out_is_reported_before_the_filter_runs(files, tmp_path, monkeypatch):
     locked = tmp_path / "ro"
