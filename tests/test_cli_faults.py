@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from localize import _output, _resources, cli, io, maps, sim
 from localize.grid import OccupancyGrid
@@ -357,3 +359,21 @@ def test_map_writes_yaml_and_pgm_together_or_not_at_all(corrected_log, tmp_path,
 def test_map_out_must_be_a_yaml_name_checked_before_mapping(corrected_log, tmp_path):
     status, _, err = run_cli("map", "--log", corrected_log, "--out", tmp_path / "office.pgm")
     assert status == 2 and "must end in .yaml" in err and not list(tmp_path.iterdir())
+
+
+# ------------------------------------------------------------------ property: any option value
+NUMERIC_OPTIONS = ["--particles", "--seed", "--beams", "--max-range", "--sigma-hit", "--temper", "--injection",
+                   "--resolution", "--frames", "--scans"]
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(option=st.sampled_from(NUMERIC_OPTIONS),
+       value=st.text(max_size=12) | st.floats().map(repr) | st.integers(-10**20, 10**20).map(str))
+def test_any_option_value_is_accepted_or_rejected_naming_the_option(tmp_path, capsys, option, value):
+    missing = tmp_path / "missing.log"
+    status = cli.main(["run", "--map", str(missing), "--log", str(missing), "--out", str(tmp_path / "o"),
+                       option, value])
+    err = capsys.readouterr().err
+    assert status == 2 and "Traceback" not in err
+    assert f"argument {option}" in err or f"{missing}: no such file" in err, err
+    assert not (tmp_path / "o").exists()
