@@ -20,6 +20,14 @@ model, resample. It writes
   convergence step, and the settings used;
 * ``DIR/particles.gif`` (with ``--animate``; ``.mp4`` too when ``ffmpeg`` exists).
 
+``DIR`` always holds one complete run or none (:mod:`localize._output`): the
+files are written under temporary names and moved into place together when
+the run is complete, ``summary.json`` last (it lists the run's files);
+results of an earlier run that this one does not produce are removed; a second
+run on a folder being written is refused; ``DIR`` is checked before the
+filter starts, and a run that would not fit into memory is refused before it
+allocates (:mod:`localize._resources`).
+
 ``map`` builds an occupancy grid map from a log with known (corrected) poses
 and writes it as a ROS ``map_server`` map (YAML + PGM).
 
@@ -39,7 +47,9 @@ import csv
 import json
 import shutil
 import sys
+import textwrap
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence, TextIO
@@ -47,6 +57,9 @@ from typing import TYPE_CHECKING, Any, Sequence, TextIO
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import __version__
+from ._output import RunOutput
+from ._resources import check_memory
 from .geometry import relative
 from .grid import OccupancyGrid
 from .mcl import ReversibleOdometry  # re-exported: it lived here before moving next to OdometryMotion
@@ -65,13 +78,14 @@ examples:
 
   # your robot: a ROS 1 bag or a ROS 2 bag folder, a map_server map, your AMCL parameters
   localize run --map office.yaml --log robot.bag --amcl-params amcl.yaml --out out/robot
+  localize run --map office.yaml --log office_run/ --amcl-params nav2_params.yaml --out out/office
   localize run --map office.yaml --log rosbag2_2024_05_01/ --scan-topic /front/scan --laser-pose 0.2 0 0
 
   # the CMU 16-831 homework data (Wean Hall): map in P(free), log in cm
-  localize run --map wean.dat --log robotdata1.log --out out/wean
+  localize run --map wean.dat --log robotdata1.log --out out/wean --animate
 
   # a CARMEN log with corrected poses: build the map from them, then localize globally
-  localize run --log intel-corrected.log.gz --build-map --particles 5000 --out out/intel
+  localize run --log intel-corrected.log.gz --build-map --particles 10000 --out out/intel
 
   # the same in two steps, keeping the map (ROS map_server YAML + PGM)
   localize map --log intel-corrected.log.gz --out intel.yaml
@@ -399,9 +413,21 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
     return out
 
 
+def write_summary(path: Path, summary: dict) -> Path:
+    """Write ``summary.json`` (indented JSON, one trailing newline)."""
+    with open(path, "w") as fh:
+        json.dump(summary, fh, indent=2)
+        fh.write("\n")
+    return path
+
+
 def write_animation(out_dir: Path, grid: OccupancyGrid, res: RunResult, reference: NDArray | None,
                     fps: int = 8) -> list[Path]:
-    """Save the particle snapshots as ``particles.gif`` (Pillow) and ``particles.mp4`` (if ffmpeg exists)."""
+    """Save the particle snapshots as ``particles.gif`` (Pillow) and ``particles.mp4`` (if ffmpeg exists).
+
+    The command line passes the staging folder of its :class:`~localize._output.RunOutput`,
+    so that an interrupted animation never reaches ``--out``.
+    """
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -414,15 +440,36 @@ def write_animation(out_dir: Path, grid: OccupancyGrid, res: RunResult, referenc
     anim = animate_snapshots(grid, res.snapshots, true_poses=reference, estimates=res.estimates,
                              figsize=(6.0, max(3.0, min(8.0, 6.0 * aspect))), size=2.0)
     written = []
-    gif = out_dir / "particles.gif"
-    anim.save(gif, writer=PillowWriter(fps=fps), dpi=80)
-    written.append(gif)
-    if shutil.which("ffmpeg"):
-        mp4 = out_dir / "particles.mp4"
-        anim.save(mp4, writer=FFMpegWriter(fps=fps), dpi=100)
-        written.append(mp4)
-    plt.close("all")
+    try:
+        gif = out_dir / "particles.gif"
+        _save_animation(anim, gif, PillowWriter(fps=fps), dpi=80)
+        written.append(gif)
+        if shutil.which("ffmpeg"):
+            mp4 = out_dir / "particles.mp4"
+            _save_animation(anim, mp4, FFMpegWriter(fps=fps), dpi=100)
+            written.append(mp4)
+    finally:
+        plt.close("all")
     return written
+
+
+def _save_animation(anim, path: Path, writer, dpi: int) -> None:
+    """``anim.save`` with Ctrl-C kept a KeyboardInterrupt and other failures an ``OSError`` naming the file.
+
+    (Interrupted before its first frame, matplotlib's writers end in an
+    ``IndexError`` raised while cleaning up, which would hide the interrupt.)
+    """
+    try:
+        anim.save(path, writer=writer, dpi=dpi)
+    except KeyboardInterrupt:
+        raise
+    except Exception as exc:
+        ctx = exc.__context__
+        while ctx is not None:
+            if isinstance(ctx, KeyboardInterrupt):
+                raise KeyboardInterrupt from None
+            ctx = ctx.__context__
+        raise OSError(f"{path.name}: could not write the animation ({type(exc).__name__}: {exc})") from exc
 
 
 # ============================================================================ argument parsing
@@ -456,6 +503,43 @@ def _nonneg_float(s: str) -> float:
     return v
 
 
+def _seed(s: str) -> int:
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0; got {s!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0 (a random generator's seed); got {v}")
+    return v
+
+
+def _unit_fraction(s: str) -> float:
+    """A number in (0, 1]."""
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number; got {s!r}") from None
+    if not (np.isfinite(v) and 0 < v <= 1):
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1]; got {s}")
+    return v
+
+
+def _fraction(s: str) -> float:
+    """A number in [0, 1)."""
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number; got {s!r}") from None
+    if not (np.isfinite(v) and 0 <= v < 1):
+        raise argparse.ArgumentTypeError(f"expected a fraction in [0, 1); got {s}")
+    return v
+
+
+def _wrap(text: str, width: int = 79) -> str:
+    """Wrap a help paragraph (the parsers use RawDescriptionHelpFormatter to keep the examples' layout)."""
+    return textwrap.fill(" ".join(text.split()), width=width)
+
+
 def _scan_slice(s: str) -> slice:
     parts = s.split(":")
     if len(parts) > 3:
@@ -475,17 +559,22 @@ def build_parser() -> argparse.ArgumentParser:
         prog="localize",
         description="Monte Carlo Localization on robot logs (CMU 16-831, CARMEN) and maps (CMU, ROS map_server).",
         epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--version", action="version", version=f"localize {__version__}",
+                    help="print the version and exit.")
     sub = ap.add_subparsers(dest="command", metavar="{run,map,demo}")
     sub.required = True
 
     run = sub.add_parser(
         "run", help="global localization with MCL on a log",
-        description="Global localization with Monte Carlo Localization: particles start uniform over the map's "
-                    "free space and are moved by the log's odometry and weighted by its laser scans. Writes "
-                    "DIR/trajectory.csv (time,x,y,theta per scan, map frame, metres and radians), "
-                    "DIR/summary.json, DIR/trajectory.tum (for evo) and, with --animate, DIR/particles.gif; for a "
-                    "ROS bag also DIR/localization.bag (ROS 1) or DIR/localization_bag/ (ROS 2) with /amcl_pose "
-                    "and the particle cloud.",
+        description=_wrap("Global localization with Monte Carlo Localization: particles start uniform over the "
+                          "map's free space and are moved by the log's odometry and weighted by its laser scans. "
+                          "Writes DIR/trajectory.csv (time,x,y,theta per scan, map frame, metres and radians), "
+                          "DIR/summary.json, DIR/trajectory.tum (for evo) and, with --animate, DIR/particles.gif; "
+                          "for a ROS bag also DIR/localization.bag (ROS 1) or DIR/localization_bag/ (ROS 2) with "
+                          "/amcl_pose and the particle cloud. The results appear together "
+                          "when the run is complete (an interrupted run leaves DIR as it was), results of an "
+                          "earlier run that this one does not produce are removed, and two runs cannot write "
+                          "one DIR at the same time."),
         epilog=EXAMPLES + "\nAMCL parameters (--amcl-params FILE.yaml), ROS 1 amcl or nav2 nav2_amcl:\n" + _amcl_table(),
         formatter_class=argparse.RawDescriptionHelpFormatter)
     g = run.add_argument_group("input")
@@ -526,8 +615,9 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--particles", type=_positive_int, default=5000, metavar="N",
                    help="number of particles (default 5000; global localization in a large building may "
                         "need 10000 or more). Example: --particles 10000")
-    f.add_argument("--seed", type=int, default=0, metavar="S",
-                   help="seed of the random generator: the same seed gives the same run (default 0). "
+    f.add_argument("--seed", type=_seed, default=0, metavar="S",
+                   help="seed of the random generator, a whole number >= 0: the same seed gives the same run "
+                        "(default 0). "
                         "Example: --seed 7")
     f.add_argument("--sensor", choices=["likelihood", "beam"], default="likelihood",
                    help="sensor model: 'likelihood' field (fast, robust to small map errors; default) or the "
@@ -548,22 +638,23 @@ def build_parser() -> argparse.ArgumentParser:
                    help="standard deviation of a beam's end point about the nearest wall (likelihood field) or "
                         "of a reading about the ray-cast range (beam model), metres (default 0.3: real maps are "
                         "off by 0.1-0.15 m and furniture moves). Example: --sigma-hit 0.2")
-    f.add_argument("--temper", type=_positive_float, default=0.05, metavar="T",
+    f.add_argument("--temper", type=_unit_fraction, default=0.05, metavar="T",
                    help="multiply each scan's log-likelihood by T in (0, 1] (default 0.05): beams are not "
                         "independent, and an over-confident filter locks onto a wrong place. Example: --temper 0.2")
     f.add_argument("--min-motion", type=_nonneg_float, nargs=2, default=(0.2, 0.3), metavar=("M", "RAD"),
                    help="weight the particles only after moving M metres or turning RAD radians since the last "
                         "update, like ROS AMCL (default 0.2 0.3; 0 0 updates at every scan). "
                         "Example: --min-motion 0 0")
-    f.add_argument("--injection", type=_nonneg_float, default=0.0, metavar="F",
-                   help="fraction of random particles injected at each resampling (default 0). "
+    f.add_argument("--injection", type=_fraction, default=0.0, metavar="F",
+                   help="fraction in [0, 1) of random particles injected at each resampling (default 0). "
                         "Example: --injection 0.01")
     f.add_argument("--track", action="store_true",
                    help="pose tracking instead of global localization: start around the log's first reference "
                         "pose (needs a corrected log).")
     o = run.add_argument_group("output")
     o.add_argument("--out", type=Path, default=Path("localize-out"), metavar="DIR",
-                   help="output folder, created if needed (default ./localize-out). Example: --out out/wean")
+                   help="output folder, created if needed and checked before the run starts; it holds one "
+                        "complete run's results or none (default ./localize-out). Example: --out out/wean")
     o.add_argument("--animate", action="store_true",
                    help="also write DIR/particles.gif (and particles.mp4 when ffmpeg is installed).")
     o.add_argument("--frames", type=_positive_int, default=100, metavar="K",
@@ -572,8 +663,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     mp = sub.add_parser(
         "map", help="build an occupancy grid map from a log with known poses",
-        description="Occupancy grid mapping with known poses (log-odds, inverse sensor model): builds a map from "
-                    "a log's reference (corrected) poses and writes it as a ROS map_server map (YAML + PGM).",
+        description=_wrap("Occupancy grid mapping with known poses (log-odds, inverse sensor model): builds a "
+                          "map from a log's reference (corrected) poses and writes it as a ROS map_server map "
+                          "(YAML + PGM)."),
         epilog="example:\n  localize map --log intel-corrected.log.gz --out intel.yaml --resolution 0.05",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     mp.add_argument("--log", type=Path, required=True, metavar="FILE",
@@ -639,6 +731,12 @@ def _given_options(args, argv: Sequence[str]) -> set[str]:
 
 
 # ============================================================================ main
+def _relay_warnings(caught, err: TextIO) -> None:
+    """Print warnings caught while reading as ``localize: warning: ...`` lines (no Python warning noise)."""
+    for w in caught:
+        print(f"localize: warning: {w.message}", file=err)
+
+
 def _load(args, err: TextIO):
     from dataclasses import replace
 
@@ -655,7 +753,12 @@ def _load(args, err: TextIO):
     else:
         if getattr(args, "scan_topic", None) or getattr(args, "odom_topic", None):
             raise ValueError("--scan-topic and --odom-topic apply to ROS bags only")
-        log = lio.read_log(args.log, format=args.log_format)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            log = lio.read_log(args.log, format=args.log_format)
+        _relay_warnings(caught, err)
+        for msg in lio.time_stamp_problems(log):
+            print(f"localize: warning: {msg}; the filter follows the record order", file=err)
         if pose is not None:
             log = replace(log, sensor_offset=np.asarray(pose, dtype=float),
                           meta={**log.meta, "sensor_offset_source": "given (--laser-pose)"})
@@ -704,32 +807,51 @@ def _jsonable(v: Any) -> Any:
     return v if isinstance(v, (int, float, str, bool)) or v is None else str(v)
 
 
-def _cmd_map(args, out: TextIO) -> int:
+def _check_free_space(grid: OccupancyGrid, where: str) -> None:
+    if not grid.free.any():
+        raise ValueError(f"{where}: the map has no free cell to localize in ({grid.occupied.sum()} occupied, "
+                         f"{grid.unknown.sum()} unknown of {grid.data.size} cells); check the map's format and "
+                         "thresholds (ROS maps: --not-free-is-occupied only adds obstacles)")
+
+
+def _cmd_map(args, out: TextIO, err: TextIO | None = None) -> int:
     from . import io as lio
     from .mapping import map_from_log
 
-    log = _load(args, out)
+    if args.out.suffix.lower() not in (".yaml", ".yml"):
+        raise ValueError(f"--out {args.out}: the map's file name must end in .yaml (the PGM is written beside it)")
+    log = _load(args, out if err is None else err)
     if log.poses is None:
         raise ValueError(f"{args.log}: the log has no reference poses to build a map from "
                          "(CARMEN corrected logs have them)")
-    grid = map_from_log(log, resolution=args.resolution, every=args.every)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    path = lio.write_ros_map(args.out, grid)
+    names = (args.out.name, args.out.with_suffix(".pgm").name)
+    with RunOutput(args.out.parent, results=names, last=args.out.name) as dest:  # YAML and PGM appear together
+        dest.open()  # checked before the mapping runs
+        grid = map_from_log(log, resolution=args.resolution, every=args.every)
+        lio.write_ros_map(dest.path(args.out.name), grid)
+        dest.commit()
+    path = args.out
     if not args.quiet:
         print(f"wrote {path} and {path.with_suffix('.pgm')}: {grid}", file=out)
     return 0
 
 
 def _cmd_run(args, out: TextIO, err: TextIO) -> int:
-    from . import io as lio
-    from .mapping import map_from_log
-
-    t_start = time.perf_counter()
     if args.map is None and not args.build_map:
         raise ValueError("give --map FILE, or --build-map to build the map from the log's corrected poses")
     if args.map is not None and args.build_map:
         raise ValueError("give either --map or --build-map, not both")
-    extras = _apply_amcl(args, out, err)
+    extras = _apply_amcl(args, out, err)  # a bad parameter file is reported before --out is touched
+    with RunOutput(args.out) as dest:  # the results appear in --out only when complete (localize._output)
+        dest.open()  # check that --out can be written, and lock it, before anything else
+        return _run(args, out, err, dest, extras)
+
+
+def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
+    from . import io as lio
+    from .mapping import map_from_log
+
+    t_start = time.perf_counter()
     log = _load(args, err)
     if args.scans is not None:
         log = log.select(args.scans)
@@ -743,8 +865,13 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
         fmt = args.map_format or lio.detect_map_format(args.map)
         if kw and fmt != "ros":
             raise ValueError("--not-free-is-occupied applies to ROS map_server maps only")
-        grid = lio.read_map(args.map, format=fmt, **kw)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            grid = lio.read_map(args.map, format=fmt, **kw)
+        _relay_warnings(caught, err)
         map_desc = str(args.map)
+    _check_free_space(grid, map_desc)
+    check_memory(args.particles, min(args.beams, log.n_beams), args.sensor, n_cells=grid.data.size)  # before allocating
     t_read = time.perf_counter() - t_start
     quiet = args.quiet
     progress = Progress(len(log), stream=err, enabled=None if not quiet else False)
@@ -758,10 +885,9 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
         progress=progress, sensor_params={**extras["sensor_params"], "sigma_hit": args.sigma_hit},
         resample_threshold=extras["resample_threshold"], kld=extras["kld"], augmented=extras["augmented"])
     progress.close()
-    args.out.mkdir(parents=True, exist_ok=True)
     ref = log.poses
-    write_trajectory(args.out / "trajectory.csv", res, ref)
-    outputs = _write_standard_outputs(args.out, res, log, err)
+    write_trajectory(dest.path("trajectory.csv"), res, ref)
+    outputs = _write_standard_outputs(dest.stage, res, log, err)
     settings = {
         "map": map_desc, "log": str(args.log), "log_format": log.format, "seed": args.seed,
         "sensor": args.sensor, "beams": min(args.beams, log.n_beams), "max_range": args.max_range,
@@ -782,17 +908,19 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
         settings["bag"] = {k: log.meta.get(k) for k in ("scan_topic", "odom_topic", "odometry", "scan_frame",
                                                          "base_frame", "sensor_offset_source")}
     summary = summarize(res, log, args.particles, ref, settings)
-    summary["outputs"] = ["trajectory.csv", *outputs, "summary.json"]
     total = time.perf_counter() - t_start
     summary["seconds_reading_files"] = round(t_read, 3)
     summary["seconds_total"] = round(total, 3)
     if summary["log_duration_s"]:
         summary["real_time_factor_total"] = round(summary["log_duration_s"] / total, 3)
     if args.animate:
-        files = write_animation(args.out, grid, res, ref)
+        files = write_animation(dest.stage, grid, res, ref)
         summary["animation"] = [p.name for p in files]
-    with open(args.out / "summary.json", "w") as fh:
-        json.dump(summary, fh, indent=2)
+    summary["files"] = ["trajectory.csv", *outputs, *summary.get("animation", []), "summary.json"]
+    write_summary(dest.path("summary.json"), summary)
+    written, removed = dest.commit()
+    if removed and not quiet:
+        print(f"removed {', '.join(p.name for p in removed)} of an earlier run from {args.out}", file=out)
     if not quiet:
         rtf = summary["real_time_factor"]
         lines = [
@@ -803,8 +931,7 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
         if ref is not None:
             lines.append(f"against the log's reference poses: converged at scan "
                          f"{summary['convergence_step_reference']}, median error {summary['median_error_m']} m")
-        lines.append(f"wrote {args.out / 'trajectory.csv'}, {', '.join(str(args.out / o) for o in outputs)} and "
-                     f"{args.out / 'summary.json'}")
+        lines.append(f"wrote {', '.join(str(p) for p in written)}")
         print("\n".join(lines), file=out)
     return 0
 
@@ -898,15 +1025,18 @@ def main(argv: Sequence[str] | None = None, stdout: TextIO | None = None, stderr
     args._argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if args.command == "map":
-            return _cmd_map(args, out)
+            return _cmd_map(args, out, err)
         if args.command == "demo":
             return _cmd_demo(args, out, err)
         return _cmd_run(args, out, err)
     except (ValueError, TypeError, OSError, ImportError) as e:
         print(f"localize: error: {e}", file=err)
+        if getattr(e, "output_note", None):
+            print(f"localize: {e.output_note}", file=err)
         return 2
-    except KeyboardInterrupt:  # pragma: no cover
-        print("localize: interrupted", file=err)
+    except KeyboardInterrupt as e:
+        print("localize: interrupted" + (f"; {e.output_note}" if getattr(e, "output_note", None) else ""),
+              file=err)
         return 130
 
 

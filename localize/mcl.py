@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import motion as _motion
 from . import resample as _rs
+from ._checks import check_poses
 from .geometry import as_poses, wrap_angle
 from .geometry import relative as _relative
 from .grid import OccupancyGrid
@@ -360,7 +361,7 @@ def estimate_pose(
     >>> e.mean[:2].round(1)                     # the mean lies between them, in no cluster
     array([6., 2.])
     """
-    p = as_poses(particles, "particles")
+    p = check_poses(particles, "particles")  # (N, 3); warns on a (3, 3) that looks transposed
     if p.ndim != 2 or p.shape[0] == 0:
         raise ValueError(f"particles must be a non-empty (N, 3) array; got shape {p.shape}")
     n = p.shape[0]
@@ -610,7 +611,7 @@ class MCL:
         on_degenerate: str = "keep",
     ) -> None:
         self.rng = _check_rng(rng)
-        p = as_poses(particles, "particles")
+        p = check_poses(particles, "particles")  # (N, 3); warns on a (3, 3) that looks transposed
         if p.ndim != 2 or p.shape[0] < 1:
             raise ValueError(f"particles must be an (N, 3) array with N >= 1; got shape {p.shape}")
         self.particles = np.array(p, dtype=float)

@@ -99,7 +99,12 @@ def _check_rng(rng) -> None:
 
 
 def _check_weights(weights: ArrayLike, name: str = "weights") -> NDArray[np.float64]:
-    """Validated weights divided by their sum (float64, 1-D, non-empty)."""
+    """Validated weights divided by their sum (float64, 1-D, non-empty).
+
+    Any finite non-negative weights with a positive entry are accepted, from
+    subnormal numbers to the largest float (``[1e308] * 3`` is three equal
+    weights): they are scaled by their maximum before they are summed.
+    """
     w = np.asarray(weights, dtype=float)
     if w.ndim != 1:
         raise ValueError(f"{name} must be a 1-D array of N particle weights; got shape {w.shape}")
@@ -114,13 +119,16 @@ def _check_weights(weights: ArrayLike, name: str = "weights") -> NDArray[np.floa
     if np.any(w < 0):
         k = int(np.flatnonzero(w < 0)[0])
         raise ValueError(f"{name} must be non-negative; {name}[{k}] = {w[k]!r}")
-    total = w.sum()
-    if not total > 0:
+    top = w.max()
+    if not top > 0:
         raise ValueError(
             f"{name} sum to zero; at least one weight must be positive "
             "(if every particle is impossible, re-initialise the filter or use uniform weights)"
         )
-    return w / total
+    # scale by the largest weight before summing: a sum of weights near the largest float
+    # overflows to inf, and subnormal weights lose their digits when divided by their sum
+    w = w / top
+    return w / w.sum()
 
 
 def _check_n(n: int | None, default: int) -> int:

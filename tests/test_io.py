@@ -92,6 +92,9 @@ def test_cmu_map_roundtrip_and_gzip(tmp_path, rng):
         (lambda s: s.replace("1 1 0.25\n", "1 1 zero\n"), 10, "'zero', expected a number"),
         (lambda s: s.replace("1 1 0.25\n", "1 1 nan\n"), 10, "expected a finite number"),
         (lambda s: s.replace("1 1 0.25\n", "1 1 1.5\n"), 10, "expected a probability of free space"),
+        # only -1 means unknown: other values below 0 are errors, not silently unknown cells (issue 16)
+        (lambda s: s.replace("1 1 0.25\n", "1 1 -0.5\n"), 10, "value 3 is -0.5, expected a probability"),
+        (lambda s: s.replace("1 1 0.25\n", "-7 1 0.25\n"), 10, "value 1 is -7, expected a probability"),
         (lambda s: s + "1 1 1\n", 12, "extra data"),
         (lambda s: s.replace("1 1 1\n", ""), None, "declares 4 lines .* ends after 3"),
         (lambda s: s.replace("global_map[0]: 3 4", "global_map[0]: 3"), 7, "two integers"),
@@ -242,6 +245,25 @@ def test_truncated_gzip_is_reported(tmp_path):
     p.write_bytes(data[: len(data) // 2])
     with pytest.raises(FormatError, match="damaged or truncated"):
         io.read_cmu_log(p)
+
+
+@pytest.mark.parametrize("reader", [io.read_cmu_log, io.read_log, io.detect_log_format, io.read_cmu_map])
+def test_corrupted_gzip_bytes_are_reported(tmp_path, reader):
+    """Flipped deflate bytes mid-stream (not a truncation) used to end in a raw zlib.error (issue 16)."""
+    text = (cmu_log_text() * 40) if reader is not io.read_cmu_map else CMU_MAP + "\n" * 3000
+    data = gzip.compress(text.encode())
+    kinds = set()
+    for pos in range(12, len(data) - 8, max(1, (len(data) - 20) // 60)):
+        b = bytearray(data)
+        b[pos] ^= 0x5A
+        p = tmp_path / "flip.gz"
+        p.write_bytes(bytes(b))
+        try:
+            reader(p)
+        except FormatError as e:
+            assert e.path == str(p) and (e.line is None or e.line >= 1)
+            kinds.add("damaged" if "damaged" in str(e) else "other")
+    assert "damaged" in kinds  # the corruption was found, and reported as a FormatError
 
 
 # ============================================================================ CARMEN
@@ -577,6 +599,37 @@ def test_detect_formats(tmp_path):
     # the format can be forced: a CMU log read as CARMEN fails loudly, not silently
     with raises_at(tmp_path / "a.log", None, r"no FLASER or ROBOTLASER1 scan records.*2 O records \(unknown"):
         io.read_log(tmp_path / "a.log", format="carmen")
+
+
+def test_ros_yaml_missing_a_key_names_it(tmp_path):
+    """A YAML without image or resolution used to get 'cannot tell the map format' (issue 16)."""
+    ros_map(tmp_path, IMG)
+    full = (tmp_path / "m.yaml").read_text().splitlines()
+    for key in ("image", "resolution", "origin"):
+        p = write(tmp_path, f"no-{key}.yaml", "\n".join(x for x in full if not x.startswith(key + ":")) + "\n")
+        assert io.detect_map_format(p) == "ros"
+        with raises_at(p, None, f"missing key '{key}'"):
+            io.read_map(p)
+
+
+# ============================================================================ time stamps
+def test_readers_record_scan_lines_and_time_stamp_problems(tmp_path):
+    """Non-monotonic and repeated time stamps are found with the first offending line (issue 16)."""
+    cmu = cmu_log_text().replace(" 0.11\n", " 0.005\n")  # the second scan goes back in time
+    p = write(tmp_path, "back.log", cmu)
+    log = io.read_cmu_log(p)
+    assert log.meta["scan_lines"].tolist() == [2, 4]
+    assert io.time_stamp_problems(log) == [
+        f"{p}:4: time stamp 0.005 is earlier than the previous scan's 0.01 (1 of 2 scans go back in time)"]
+    c = write(tmp_path, "same.log", carmen_text().replace("0.3 host 0.3", "0.1 host 0.1"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)
+        log = io.read_carmen_log(c)
+    assert log.meta["scan_lines"].tolist() == [5, 11]
+    assert io.time_stamp_problems(log) == [f"{c}:11: time stamp 0.1 repeats the previous scan's (1 of 2 scans)"]
+    assert io.time_stamp_problems(log.select([1])) == []
+    assert log.select([1]).meta["scan_lines"].tolist() == [11]   # per-scan meta follows select()
+    assert io.time_stamp_problems(io.read_cmu_log(write(tmp_path, "ok.log", cmu_log_text()))) == []
 
 
 # ============================================================================ LaserLog

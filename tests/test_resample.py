@@ -78,6 +78,48 @@ def test_property_valid_indices_for_any_weights(w, seed):
         assert np.all(w[idx] > 0)
 
 
+FLOAT_MAX = float(np.finfo(np.float64).max)
+
+
+@pytest.mark.parametrize("fn", ALL, ids=lambda f: f.__name__)
+@pytest.mark.parametrize("w", [[1e308] * 3, [FLOAT_MAX] * 4, [5e-324] * 3, [5e-324, FLOAT_MAX, 0.0]],
+                         ids=["1e308", "max", "subnormal", "mixed"])
+def test_extreme_but_finite_weights(fn, w):
+    """Huge weights used to overflow the sum (IndexError: index -1, or 'weights sum to zero')."""
+    w = np.asarray(w)
+    idx = fn(w, np.random.default_rng(0))
+    assert idx.shape == w.shape and np.all(w[idx] > 0)
+    if np.all(w == w[0]):   # equal weights: systematic, stratified and residual give one copy each
+        if fn not in (rs.multinomial, rs.multinomial_loop):
+            assert np.array_equal(np.sort(idx), np.arange(w.size))
+    assert 1.0 - 1e-12 <= rs.effective_sample_size(w) <= w.size + 1e-12
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    w=arrays(np.float64, st.integers(1, 30),
+             elements=st.floats(0, FLOAT_MAX, allow_subnormal=True, allow_nan=False, allow_infinity=False)
+             ).filter(lambda a: a.max() > 0),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_property_resamplers_over_the_whole_float_range(w, seed):
+    """Any finite non-negative weights with one positive entry: valid indices, counts near n * w_i."""
+    p = (w / w.max()) / (w / w.max()).sum()   # the exact normalisation, computed safely
+    for fn in ALL:
+        idx = fn(w, np.random.default_rng(seed))
+        assert idx.shape == w.shape and idx.dtype == np.int64
+        assert np.all((idx >= 0) & (idx < w.size))
+        assert np.all(w[idx] > 0), fn.__name__
+        if fn in (rs.systematic, rs.systematic_loop, rs.residual, rs.residual_loop):
+            counts = np.bincount(idx, minlength=w.size)
+            if fn in (rs.systematic, rs.systematic_loop):   # floor(n w_i) or ceil(n w_i) copies
+                assert np.all(np.abs(counts - w.size * p) < 1 + 1e-9), fn.__name__
+            else:                                           # at least floor(n w_i) copies
+                assert np.all(counts >= np.floor(w.size * p * (1 - 1e-12))), fn.__name__
+    ess = rs.effective_sample_size(w)
+    assert np.isfinite(ess) and 1.0 - 1e-9 <= ess <= w.size + 1e-9
+
+
 @pytest.mark.parametrize("name", ["stratified", "systematic"])
 def test_fast_equals_readable_exactly(name):
     fast, loop = getattr(rs, name), getattr(rs, name + "_loop")

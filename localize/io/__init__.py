@@ -27,7 +27,7 @@ Examples
 (['cmu', 'ros'], ['carmen', 'cmu'])
 """
 
-from ._common import FormatError, LaserLog, ParseWarning, open_text
+from ._common import FormatError, LaserLog, ParseWarning, open_text, time_stamp_problems
 from .carmen import carmen_angles, read_carmen_log, write_carmen_log
 from .cmu import CMU_ANGLES, CMU_MAX_RANGE, CMU_SENSOR_OFFSET, read_cmu_log, read_cmu_map, write_cmu_log, write_cmu_map
 from .detect import LOG_FORMATS, MAP_FORMATS, detect_log_format, detect_map_format, read_log, read_map
@@ -36,7 +36,7 @@ from .rosbag import BAG_FORMATS, bag_topics, is_rosbag, read_rosbag, write_resul
 from .tum import read_tum, write_tum
 
 __all__ = [
-    "FormatError", "ParseWarning", "LaserLog", "open_text",
+    "FormatError", "ParseWarning", "LaserLog", "open_text", "time_stamp_problems",
     "read_cmu_map", "write_cmu_map", "read_cmu_log", "write_cmu_log", "CMU_ANGLES", "CMU_MAX_RANGE",
     "CMU_SENSOR_OFFSET",
     "read_carmen_log", "write_carmen_log", "carmen_angles",

@@ -6,6 +6,7 @@ import gzip
 import io as _io
 import os
 import warnings
+import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator
@@ -15,9 +16,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..geometry import as_poses, compose, inverse, relative
 
-__all__ = ["FormatError", "ParseWarning", "LaserLog", "open_text", "read_lines", "SkipCounter"]
+__all__ = ["FormatError", "ParseWarning", "LaserLog", "open_text", "read_lines", "SkipCounter", "time_stamp_problems"]
 
 PathLike = str | os.PathLike
+
+#: What reading a damaged gzip stream raises: EOFError when it ends early, BadGzipFile (an
+#: OSError) for a bad header or CRC, zlib.error for corrupted deflate bytes in the middle.
+GZIP_ERRORS = (EOFError, OSError, zlib.error)
 
 
 class FormatError(ValueError):
@@ -137,15 +142,15 @@ def open_text(path: PathLike) -> _io.TextIOBase:
 def read_lines(path: PathLike) -> Iterator[tuple[int, str]]:
     """Yield ``(line_number, line)`` of a (possibly gzipped) text file, 1-based.
 
-    A gzip stream that ends early is reported as a :class:`FormatError`
-    naming the last complete line.
+    A gzip stream that ends early or holds corrupted bytes is reported as a
+    :class:`FormatError` naming the line after the last complete one.
     """
     n = 0
     with open_text(path) as f:
         try:
             for n, line in enumerate(f, start=1):  # noqa: B007
                 yield n, line
-        except (EOFError, gzip.BadGzipFile, OSError) as exc:
+        except GZIP_ERRORS as exc:
             raise FormatError(path, n + 1, f"the compressed stream is damaged or truncated ({exc})") from None
 
 
@@ -164,6 +169,10 @@ def parse_floats(tokens: list[str], path: PathLike | None, line: int, what: str)
         k = int(np.flatnonzero(~np.isfinite(vals))[0])
         raise FormatError(path, line, f"{what}: field {k + 1} is {tokens[k]!r}, expected a finite number")
     return vals
+
+
+#: Entries of ``LaserLog.meta`` that hold one value per scan (kept in step by ``select``).
+_PER_SCAN_META = ("scan_lines", "neff")
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,7 +211,8 @@ class LaserLog:
         Counts of records skipped while reading, by kind.
     meta : dict
         How ambiguous choices were resolved (where ``max_range`` and the odometry
-        came from, ...).
+        came from, ...); readers also store ``meta["scan_lines"]``, the line
+        number of each scan in its file (see :func:`time_stamp_problems`).
 
     Examples
     --------
@@ -339,13 +349,18 @@ class LaserLog:
         idx = np.atleast_1d(idx)
         if idx.size == 0:
             raise ValueError("select() would leave no scan; index picks nothing")
+        meta = {**self.meta, "selected": True}
+        for key in _PER_SCAN_META:  # per-scan entries follow the scans
+            v = meta.get(key)
+            if isinstance(v, np.ndarray) and v.shape[:1] == (len(self),):
+                meta[key] = v[idx]
         return replace(
             self,
             times=self.times[idx],
             odometry=self.odometry[idx],
             ranges=self.ranges[idx],
             poses=None if self.poses is None else self.poses[idx],
-            meta={**self.meta, "selected": True},
+            meta=meta,
         )
 
     def select_beams(self, step: int = 1, count: int | None = None) -> "LaserLog":
@@ -387,3 +402,45 @@ def median_offset(robot: NDArray[np.float64], laser: NDArray[np.float64]) -> tup
     med[2] = float(np.arctan2(np.median(np.sin(rel[:, 2])), np.median(np.cos(rel[:, 2]))))
     spread = float(np.max(np.hypot(rel[:, 0] - med[0], rel[:, 1] - med[1]))) if len(rel) else 0.0
     return med, spread
+
+
+def time_stamp_problems(log: LaserLog) -> list[str]:
+    """Sentences about scan time stamps that go backwards or repeat, naming the first offending line.
+
+    Filters sequence scans by record order, so such logs still work; but
+    durations and real-time factors computed from them mean nothing, and a
+    user should hear about it (the command line prints these as warnings).
+    Each sentence reads ``file:line: ...`` when the reader recorded the scans'
+    line numbers (``meta["scan_lines"]``), else ``file: scan k: ...``.
+
+    Examples
+    --------
+    >>> log = LaserLog(times=[0.0, 1.0, 0.5, 0.5, 2.0], odometry=np.zeros((5, 3)), ranges=np.ones((5, 2)),
+    ...                angles=[0.0, 0.1], max_range=5.0, source="r.log",
+    ...                meta={"scan_lines": np.array([3, 5, 7, 9, 11])})
+    >>> for m in time_stamp_problems(log):
+    ...     print(m)
+    r.log:7: time stamp 0.5 is earlier than the previous scan's 1 (1 of 5 scans go back in time)
+    r.log:9: time stamp 0.5 repeats the previous scan's (1 of 5 scans)
+    """
+    t = np.asarray(log.times, dtype=float)
+    if t.size < 2:
+        return []
+    lines = log.meta.get("scan_lines")
+    lines = np.asarray(lines) if lines is not None and len(lines) == t.size else None
+
+    def where(k: int) -> str:
+        return f"{log.source}:{int(lines[k])}" if lines is not None else f"{log.source}: scan {k}"
+
+    dt = np.diff(t)
+    out = []
+    back = np.flatnonzero(dt < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        out.append(f"{where(k)}: time stamp {t[k]:.10g} is earlier than the previous scan's {t[k - 1]:.10g} "
+                   f"({back.size} of {t.size} scans go back in time)")
+    same = np.flatnonzero(dt == 0)
+    if same.size:
+        k = int(same[0]) + 1
+        out.append(f"{where(k)}: time stamp {t[k]:.10g} repeats the previous scan's ({same.size} of {t.size} scans)")
+    return out

@@ -321,6 +321,7 @@ def read_carmen_log(
         ok = k >= 0
         nf[k[ok]] = nval[ok]
     meta["neff"] = nf
+    meta["scan_lines"] = lines
     dt = np.diff(times)
     meta["timestamps_monotonic"] = bool(np.all(dt >= 0))
     meta["timestamps_distinct"] = float(np.unique(times).size / times.size)

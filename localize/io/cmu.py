@@ -17,7 +17,7 @@ two numbers of ``global_map[0]:`` are read, as the original C loaders do, as
 ``size_y size_x``: the count of values on a line, then the count of lines (the
 ``global_mapsize_x/y`` header lines, when present, must agree). Values are the
 probability that the cell is **free** — walls near 0, floor near 1 — and
-negative values (``-1``) mark unknown cells. :func:`read_cmu_map` converts to
+``-1`` marks unknown cells (any other value outside [0, 1] is an error). :func:`read_cmu_map` converts to
 the :class:`~localize.OccupancyGrid` convention: occupancy probability
 ``1 - value``, NaN for unknown, rows indexed by y.
 
@@ -84,7 +84,7 @@ def read_cmu_map(path: PathLike) -> OccupancyGrid:
         (a ``ValueError``) ``file:line: what was expected`` for a missing
         ``global_map[0]`` line, a header that disagrees with the data, a line
         with the wrong number of values, non-numeric or NaN values, values
-        above 1, or missing/extra lines.
+        outside [0, 1] other than -1 (unknown), or missing/extra lines.
 
     Examples
     --------
@@ -171,8 +171,9 @@ def read_cmu_map(path: PathLike) -> OccupancyGrid:
             raise FormatError(path, n, f"expected {size_y} values (one per y cell, from line {size_line}); "
                                        f"got {len(tokens)}")
         vals = parse_floats(tokens, path, n, f"map line for x = {len(rows)}")
-        if np.any(vals > 1.0):
-            k = int(np.flatnonzero(vals > 1.0)[0])
+        bad_vals = ((vals < 0.0) | (vals > 1.0)) & (vals != -1.0)
+        if np.any(bad_vals):
+            k = int(np.flatnonzero(bad_vals)[0])
             raise FormatError(path, n, f"value {k + 1} is {tokens[k]}, expected a probability of free space in "
                                        "[0, 1] or -1 for unknown")
         rows.append(vals)
@@ -286,6 +287,7 @@ def read_cmu_log(
     odo_t: list[float] = []
     odo_p: list[NDArray] = []
     scan_t: list[float] = []
+    scan_lines: list[int] = []
     robot: list[NDArray] = []
     laser: list[NDArray] = []
     ranges: list[NDArray] = []
@@ -325,6 +327,7 @@ def read_cmu_log(
                 bad(n, f"range r{k + 1} is {tokens[7 + k]}, expected a distance >= 0 cm")
                 continue
             scan_t.append(v[-1])
+            scan_lines.append(n)
             robot.append(np.array([v[0] / 100.0, v[1] / 100.0, v[2]]))
             laser.append(np.array([v[3] / 100.0, v[4] / 100.0, v[5]]))
             ranges.append(r / 100.0)
@@ -335,7 +338,8 @@ def read_cmu_log(
         raise FormatError(path, None, "no laser records ('L ...'): nothing to localize with")
     skips.warn()
     robot_a, laser_a = np.array(robot), np.array(laser)
-    meta: dict = {"units": "converted from cm to m", "records": {"O": len(odo_t), "L": len(scan_t)}}
+    meta: dict = {"units": "converted from cm to m", "records": {"O": len(odo_t), "L": len(scan_t)},
+                  "scan_lines": np.array(scan_lines)}
     if sensor_offset is None:
         off, spread = median_offset(robot_a, laser_a)
         meta["sensor_offset_source"] = f"median of laser poses seen from robot poses (max deviation {spread:.3f} m)"
@@ -377,7 +381,9 @@ def write_cmu_log(path: PathLike, log: LaserLog, decimals: int = 3) -> Path:
     records: list[tuple[float, int, str]] = []
     fmt = f"{{:.{decimals}f}}"
     for k in range(len(log)):
-        r = np.where(log.ranges[k] >= log.max_range, 8183.0, log.ranges[k] * 100.0)
+        # whole cm; a reading just below max_range must not round up to "no return"
+        below = np.minimum(np.round(log.ranges[k] * 100.0), np.ceil(log.max_range * 100.0) - 1.0)
+        r = np.where(log.ranges[k] >= log.max_range, 8183.0, below)
         o, lp = log.odometry[k], laser[k]
         head = (f"{fmt.format(o[0] * 100)} {fmt.format(o[1] * 100)} {o[2]:.6f} "
                 f"{fmt.format(lp[0] * 100)} {fmt.format(lp[1] * 100)} {lp[2]:.6f}")

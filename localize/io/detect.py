@@ -6,7 +6,7 @@ import os
 from pathlib import Path
 
 from ..grid import OccupancyGrid
-from ._common import FormatError, LaserLog, open_text
+from ._common import GZIP_ERRORS, FormatError, LaserLog, open_text
 from .carmen import _KEYWORD, read_carmen_log
 from .cmu import read_cmu_log, read_cmu_map
 from .ros import read_ros_map
@@ -17,27 +17,35 @@ PathLike = str | os.PathLike
 
 MAP_FORMATS = ("cmu", "ros")
 LOG_FORMATS = ("cmu", "carmen")
+_ROS_KEYS = frozenset({"image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh", "mode"})
 
 
 def _head(path: PathLike, n_lines: int = 200) -> list[tuple[int, str]]:
-    """The first non-blank lines of a (possibly gzipped) text file with their numbers."""
-    out = []
+    """The first non-blank lines of a (possibly gzipped) text file with their numbers.
+
+    A damaged gzip stream ends the head early (the reader reports the damage
+    with its line); damage before the first line is a :class:`FormatError`.
+    """
+    out: list[tuple[int, str]] = []
+    k = 0
     with open_text(path) as f:
         try:
-            for k, line in enumerate(f, start=1):
+            for k, line in enumerate(f, start=1):  # noqa: B007
                 if line.strip():
                     out.append((k, line.strip()))
                 if len(out) >= n_lines:
                     break
-        except (EOFError, OSError):
-            pass
+        except GZIP_ERRORS as exc:
+            if not out:
+                raise FormatError(path, k + 1, f"the compressed stream is damaged or truncated ({exc})") from None
     return out
 
 
 def detect_map_format(path: PathLike) -> str:
     """Name the format of a map file from its content: ``"cmu"`` or ``"ros"``.
 
-    A ROS map is recognised by its YAML keys (``image:``, ``resolution:``); a
+    A ROS map is recognised by its YAML keys (``image:``, ``resolution:``,
+    ``origin:`` ...; one is enough, so that the reader can name a missing one); a
     CMU/BeeSoft map by its ``robot_specifications->`` header or
     ``global_map[0]:`` line. An image file (PGM/PNG) is rejected with a hint to
     pass its YAML instead.
@@ -68,7 +76,7 @@ def detect_map_format(path: PathLike) -> str:
             return "cmu"
         if ":" in line and not line.startswith("#"):
             keys.add(line.split(":", 1)[0].strip())
-    if {"image", "resolution"} <= keys:
+    if keys & _ROS_KEYS:  # a map_server YAML, perhaps with a key missing: the reader names it
         return "ros"
     first = head[0] if head else (1, "")
     raise FormatError(p, first[0], "cannot tell the map format: expected a CMU 16-831 map "

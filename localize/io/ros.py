@@ -389,8 +389,8 @@ def _read_image(path: Path) -> NDArray:
             if im.mode in ("P", "PA"):
                 im = im.convert("RGBA")
             arr = np.array(im)
-    except (OSError, ValueError) as exc:
-        raise FormatError(path, None, f"cannot read the image ({exc})") from None
+    except Exception as exc:  # Pillow reports damage as OSError, SyntaxError, zlib.error, struct.error ...
+        raise FormatError(path, None, f"cannot read the image: damaged or not a PNG/PGM ({exc})") from None
     if arr.dtype == bool:
         arr = np.where(arr, 255, 0).astype(np.uint8)
     elif arr.dtype not in (np.uint8, np.uint16):
