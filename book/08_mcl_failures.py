@@ -400,7 +400,8 @@ plt.show()
 # range, so that the tie-breaking box is seen only near its corner, and
 # compare plain MCL with augmented MCL.)
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 1
 w_slow = w_fast = 1.0
 for step in (1, 2, 3):
@@ -408,7 +409,8 @@ for step in (1, 2, 3):
     w_fast += 0.5 * (0.01 - w_fast)
     print(f"step {step}: w_slow = {w_slow:.4f}, w_fast = {w_fast:.4f}, p_inject = {max(0, 1 - w_fast / w_slow):.3f}")
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 2
 from localize.kld import bin_keys, kld_sample_size  # noqa: E402
 
@@ -424,7 +426,8 @@ for n, key in enumerate(keys.tolist(), start=1):
         break
 print("loop:", n_needed, " localize:", kld_sample_size(draws, (0.5, 0.5, np.radians(10)), n_min=300))
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 3
 final_share = []
 for seed in range(8):

@@ -490,7 +490,8 @@ plt.show()
 # matters more on the real Intel log (the text below the solution gives
 # numbers measured there).
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Solution 1. Text line 41 is x cell 40; values 101..103 are y cells 100..102.
 x_cell, y_cells = 40, np.array([100, 101, 102])
 centres = np.column_stack([np.full(3, (x_cell + 0.5) * 0.1), (y_cells + 0.5) * 0.1])
@@ -501,7 +502,8 @@ print("stored occupancy:", occ.round(2).tolist(), "at grid.data[i=y, j=x] =", [(
 print("beam 46 points at", -90 + 45, "degrees, i.e. 45 degrees to the robot's right")
 
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Solution 2.
 def read_xy_log(path):
     times, odo, ranges = [], [], []
@@ -536,7 +538,8 @@ try:
 except io.FormatError as e:
     print("rejected:", hide(e))
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Solution 3.
 for temper in (1.0, 0.05):
     steps = []

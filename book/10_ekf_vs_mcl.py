@@ -481,8 +481,8 @@ plt.show()
 # does it converge from its random guess, and why?
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # **Solution 1.** $\delta = (3, 4)$, $r = 5$, $q = 25$. Range $5$, bearing
 # $\operatorname{atan2}(4, 3) - \pi/2 = 0.9273 - 1.5708 = -0.6435$ rad.
@@ -494,9 +494,11 @@ plt.show()
 # bearing. A measurement is informative exactly when that share is large (the
 # gain $K = \bar\Sigma H^\top S^{-1}$ is then large), so both are, the bearing
 # marginally more.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 pose, m = np.array([1.0, 1.0, np.pi / 2]), np.array([4.0, 5.0])
 H = landmark_jacobian(pose, m)
 S = H @ np.diag([0.25, 0.25, 0.01]) @ H.T + np.diag([0.04, 0.0025])
@@ -505,8 +507,8 @@ print("H =\n", H.round(4))
 print("S =\n", S.round(4) + 0.0)
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # **Solution 2.** A subclass that gates each sighting before the update. After a
 # kidnapping almost every sighting is an "outlier" for the old belief, so the
@@ -514,9 +516,11 @@ print("S =\n", S.round(4) + 0.0)
 # wrong place, but it never recovers either. Gating protects against spurious
 # sightings and wrong associations while tracking; it cannot help with a lost
 # robot.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 class GatedEKF(EKFLocalizer):
     """EKF localization that skips sightings outside the 99% innovation gate."""
 
@@ -547,8 +551,8 @@ for seed in range(10):
 print(f"gated EKF lost after the kidnapping in {lost} of 10 seeds")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # **Solution 3.** With few particles and the exact sensor model, almost no
 # particle starts close enough to the truth to survive the first sightings;
@@ -557,9 +561,11 @@ print(f"gated EKF lost after the kidnapping in {lost} of 10 seeds")
 # so the EKF's first updates drag its mean close to the truth from almost any
 # guess — global localization is hard for the EKF because of data association,
 # not because of the Gaussian alone.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 for n in (100, 300, 1000):
     rates = []
     for infl in (1.0, 2.0):
