@@ -414,6 +414,34 @@ for floor in [0.5, 2.0]:
 # </details>
 
 # %% [markdown]
+# 4. **Implementation, self-checked.** Write the correction step yourself:
+#    `grid_update(belief, expected, beam_bins, ranges, beam_pdf)` multiplies a
+#    `(K, H, W)` belief by the likelihood of a scan and normalises. `expected[k, i, j]`
+#    is the range from cell $(i, j)$ along the *absolute* heading bin $k$; beam $b$,
+#    `beam_bins[b]` bins to the left of the robot's heading, therefore looks along
+#    bin `(k + beam_bins[b]) % K` for a robot in bin $k$ (what `GridLocalizer` does
+#    with its `np.roll` of the table). Test it with `check.grid_update(grid_update)`,
+#    which tries the classic mistakes: the beam offset forgotten or applied the
+#    wrong way, and a product of 360 beam likelihoods that underflows.
+
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
+from localize import check  # noqa: E402
+
+
+def grid_update(belief, expected, beam_bins, ranges, beam_pdf):
+    """Posterior of grid localization after one scan, computed in log space."""
+    k = np.arange(belief.shape[0])
+    log_lik = np.zeros(belief.shape)
+    for b, z in zip(beam_bins, ranges):
+        log_lik += np.log(beam_pdf(z, expected[(k + b) % len(k)]))
+    posterior = belief * np.exp(log_lik - log_lik.max())
+    return posterior / posterior.sum()
+
+
+print(check.grid_update(grid_update))
+
+# %% [markdown]
 # ## References
 #
 # * S. Thrun, W. Burgard, D. Fox. *Probabilistic Robotics*. MIT Press, 2005:

@@ -298,6 +298,29 @@ for zstar in (0.05, 5.0, MAX_RANGE):
           f"= {cont + beam.z_max:.6f}")
 
 # %% [markdown]
+# **A reading at max range** is where a density and a point mass meet. The
+# reading $z = z_\text{max}$ ("no return") has a probability of its own, the mass
+# $z_\text{max}$, while the continuous parts give any single reading probability
+# zero. A likelihood, though, only compares hypotheses for the *same* reading, and
+# PR's table 6.1 adds all four terms at every $z$; `BeamModel`, the self-check
+# `check.beam_model` and the homework follow it:
+# $p(z_\text{max} \mid z^*) = z_\text{hit}\,p_\text{hit}(z_\text{max} \mid z^*) +
+# z_\text{short}\,p_\text{short}(z_\text{max} \mid z^*) + z_\text{max}$ (the uniform
+# part stops below $z_\text{max}$), and a reading beyond $z_\text{max}$ counts as
+# $z_\text{max}$. A beam expected to hit a wall well inside the range scores about
+# the mass alone; a beam expected to fly into open space ($z^* = z_\text{max}$) has
+# half of its truncated hit Gaussian at $z_\text{max}$ and scores far more, so a
+# particle that expects open space where the laser saw none is rewarded (ROS
+# AMCL's beam model does the same). Adding a mass to a density mixes units, but it
+# changes no integral (a point has no width), and every particle is scored the
+# same way for the same reading, so the weights stay comparable:
+
+# %%
+for zstar in (5.0, MAX_RANGE):
+    print(f"p(z = max range | z* = {zstar:4.1f} m) = {float(beam.pdf(MAX_RANGE, zstar)):.3f}"
+          f"  (of which the mass z_max = {beam.z_max:.2f})")
+
+# %% [markdown]
 # Sampling from the model (what the simulator of the particle-filter
 # chapters does) first picks a cause with the mixture weights, then draws
 # from it by inverting its cumulative distribution. The histogram of 200,000

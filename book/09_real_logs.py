@@ -566,3 +566,31 @@ for temper in (1.0, 0.05):
 # alternatives until they are really ruled out. Too small a factor and the
 # filter converges slowly and tracks loosely: it is a dial between over- and
 # under-confidence.
+
+# %% [markdown]
+# **4 (implementation, self-checked).** The ROS map trap in code: write
+# `map_image(image, negate)` that turns a `map_server` picture (an `(H, W)` array
+# of grey values as stored in the PGM file) into occupancy in `localize`'s
+# convention: 1.0 occupied, 0.0 free, NaN unknown, by the trinary rule and the
+# default thresholds of this chapter, and with row 0 at the *bottom*. Test it with
+# `check.map_image(map_image)`; it tries the picture upside down, white read as
+# occupied, `negate` ignored and unknown cells made free.
+
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
+from localize import check  # noqa: E402
+
+
+def map_image(image, negate):
+    """Occupancy of a map_server picture (trinary, default thresholds), row 0 = the bottom of the map."""
+    v = np.asarray(image, dtype=float)
+    p = v / 255.0 if negate else (255.0 - v) / 255.0
+    occupancy = np.full(p.shape, np.nan)
+    occupancy[p > 0.65] = 1.0
+    occupancy[p < 0.196] = 0.0
+    return np.flipud(occupancy)
+
+
+print(check.map_image(map_image))
+mine = map_image(io.read_pgm(folder / "grey.pgm"), negate=False)
+print("agrees with io.read_map on grey.yaml:", bool(np.array_equal(mine, strict.data, equal_nan=True)))

@@ -577,6 +577,33 @@ mc = C.monte_carlo(C.scenario("global", known_ids=True), range(10), filters=("EK
 print(f"EKF with identified landmarks from a random guess: fails {100 * mc.metrics['EKF'].failure_rate:.0f}%")
 
 # %% [markdown]
+# **4 (implementation, self-checked).** Write one EKF correction,
+# `ekf_update(mean, cov, z, landmark, Q)`, for a range-bearing sighting `z` of
+# the landmark at `landmark` (PR table 7.2, lines 12-21, for one landmark; use
+# `landmark_measurement` and `landmark_jacobian`). Test it with
+# `check.ekf_update(ekf_update)`; one of its cases sees a landmark behind the
+# robot, where the bearing innovation crosses $\pm\pi$.
+
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
+from localize import check  # noqa: E402
+
+
+def ekf_update(mean, cov, z, landmark, Q):
+    """EKF measurement update with one range-bearing sighting."""
+    H = landmark_jacobian(mean, landmark)
+    S = H @ cov @ H.T + Q
+    K = cov @ H.T @ np.linalg.inv(S)
+    innovation = np.asarray(z, dtype=float) - landmark_measurement(mean, landmark)
+    innovation[1] = localize.wrap_angle(innovation[1])
+    new_mean = mean + K @ innovation
+    new_mean[2] = localize.wrap_angle(new_mean[2])
+    return new_mean, (np.eye(3) - K @ H) @ cov
+
+
+print(check.ekf_update(ekf_update))
+
+# %% [markdown]
 # ## References
 #
 # * S. Thrun, W. Burgard, D. Fox, *Probabilistic Robotics*, MIT Press 2005 —
