@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import nbformat
 import pytest
-
 from test_browser import BOOK, KERNEL_TIMEOUT_MS, artifacts, lab, lab_page, page  # noqa: F401 - fixtures
 
 pytestmark = pytest.mark.browser
