@@ -3,7 +3,10 @@
 Each ``check.<name>(fn)`` takes a function you wrote, runs it on cases with
 known answers, and returns a :class:`Report`. The report is truthy when every
 property holds, prints one line per property (``PASS`` / ``FAIL``) and, for
-each failure, a hint that names the usual mistake behind it. A check never
+each failure, what your function gave (``seen``) next to the right answer
+(``expected``) and a hint. A hint that names a particular mistake is given
+only when your result is what that mistake produces; otherwise the hint
+restates the rule. A check never
 crashes on a wrong answer: exceptions, wrong types and wrong shapes become
 failed properties.
 
@@ -442,7 +445,7 @@ def sample_odometry(fn: Callable) -> Report:
             r.add(name, ok_mean and ok_var,
                   f"mean (x, y, theta) {_fixed(fg.mean(axis=0))}, std {_fixed(fg.std(axis=0))}", hint,
                   expected=f"mean (x, y, theta) {_fixed(fr.mean(axis=0))}, std {_fixed(fr.std(axis=0))} "
-                           f"(+- {_fixed(5 * sd / math.sqrt(n))} on the mean)")
+                           f"(+- {_fixed(6 * sd / math.sqrt(n))} on the mean)")
         a = _array(r, "uses the rng it is given (reproducible)",
                    _call(r, "uses the rng it is given (reproducible)", fn, np.zeros((5, 3)), u, alphas,
                          np.random.default_rng(7)))
