@@ -192,8 +192,9 @@ def _array(report: Report, name: str, value: Any, shape: tuple | None = None,
         report.add(name, False, "returned a ragged or object array", "return a NumPy array of numbers")
         raise _Stop
     if shape is not None and a.shape != tuple(shape):
-        report.add(name, False, f"returned shape {a.shape}, expected {tuple(shape)}",
-                   "keep one entry per input element (check which axis you sum or index over)")
+        report.add(name, False, f"returned shape {a.shape}",
+                   "keep one entry per input element (check which axis you sum or index over)",
+                   expected=f"shape {tuple(shape)}")
         raise _Stop
     return a
 
@@ -261,7 +262,7 @@ def bayes_update(fn: Callable) -> Report:
                      prior.shape)
         r.add("returns one probability per cell", True)
         r.add("the posterior sums to one", abs(float(out.sum()) - 1.0) < 1e-9, f"sum = {float(out.sum()):.6g}",
-              "after multiplying, divide by the sum (the normaliser eta of Bayes rule)")
+              "after multiplying, divide by the sum (the normaliser eta of Bayes rule)", expected="sum = 1")
         prod = prior * lik
         add = prior + lik
         ok = np.allclose(out, expected, rtol=1e-8, atol=1e-12)
@@ -643,7 +644,7 @@ def scan_log_likelihood(fn: Callable, params: dict | None = None) -> Report:
                     "instead of multiplying probabilities")
         else:
             hint = "log p(scan | pose) = sum over beams of log p(z_k | z_k*)"
-        r.add(name, bool(np.isclose(val, ref, rtol=1e-6)), f"got {val:.6g}, expected {ref:.6g}", hint)
+        r.add(name, bool(np.isclose(val, ref, rtol=1e-6)), f"{val:.6g}", hint, expected=f"{ref:.6g}")
         r.add("stays finite for 180 beams (no underflow)", bool(np.isfinite(val)), f"got {val}",
               "work in log space: sum log-densities instead of taking the log of a product")
         shifted = float(np.reshape(np.asarray(fn(ranges, expected + 1.0, dict(prm)), float), -1)[0])
@@ -734,10 +735,10 @@ def resampler(fn: Callable, scheme: str | None = None, repeats: int = 4000) -> R
         z = np.abs(mean - n * w) / se
         unbiased = bool(np.all(z < 5.0))
         r.add("unbiased: mean offspring count is N * w_i", unbiased,
-              f"mean counts {_fixed(mean)}, expected {_fixed(n * w)}",
+              f"mean counts {_fixed(mean)}",
               "every particle must be copied N * w_i times on average: check the offsets of your pointers "
               "(systematic: u_m = r + m / N with r ~ U[0, 1/N)); residual: draw the remainder from "
-              "N * w_i - floor(N * w_i), not from w_i")
+              "N * w_i - floor(N * w_i), not from w_i", expected=f"{_fixed(n * w)} (+- {_fixed(5 * se)})")
         a = _indices(r, "reproducible with the same rng", fn, w, np.random.default_rng(42))
         b = _indices(r, "reproducible with the same rng", fn, w, np.random.default_rng(42))
         r.add("reproducible with the same rng", np.array_equal(a, b), "",
@@ -769,18 +770,21 @@ def resampler(fn: Callable, scheme: str | None = None, repeats: int = 4000) -> R
             r.add("low variance: every particle gets floor(N w_i) or ceil(N w_i) copies", ok,
                   f"count ranges seen {_fixed(counts.min(0))} .. {_fixed(counts.max(0))}",
                   "use ONE random number r in [0, 1/N) and N equally spaced pointers r + m/N "
-                  "(m = 0 .. N-1); a pointer per draw, or r in [0, 1), breaks this")
+                  "(m = 0 .. N-1); a pointer per draw, or r in [0, 1), breaks this",
+                  expected=f"counts between {_fixed(lo)} .. {_fixed(hi)}")
         if scheme in ("systematic", "stratified", "residual"):
             ok = bool(var.sum() < 0.8 * var_multi.sum())
             r.add(f"{scheme} has lower offspring variance than multinomial", ok,
-                  f"total variance {var.sum():.3f}, multinomial {var_multi.sum():.3f}",
+                  f"total variance {var.sum():.3f}",
                   f"{scheme} resampling must spread its pointers over [0, 1); independent uniform draws "
-                  "give multinomial resampling")
+                  "give multinomial resampling",
+                  expected=f"below {0.8 * var_multi.sum():.3f} (0.8 x multinomial's {var_multi.sum():.3f})")
         if scheme == "multinomial":
             ok = bool(abs(var.sum() / var_multi.sum() - 1.0) < 0.15)
             r.add("multinomial has offspring variance N w (1 - w)", ok,
-                  f"total variance {var.sum():.3f}, expected {var_multi.sum():.3f}",
-                  "draw N independent uniforms and find each one's particle in the cumulative sum")
+                  f"total variance {var.sum():.3f}",
+                  "draw N independent uniforms and find each one's particle in the cumulative sum",
+                  expected=f"{var_multi.sum():.3f} (within 15%)")
         _ = ref  # the reference module documents the schemes
 
     return _run(f"resampler ({scheme or 'any scheme'})", body)
@@ -806,12 +810,13 @@ def effective_sample_size(fn: Callable) -> Report:
             val = float(np.reshape(v, -1)[0])
             hint = ("N_eff = 1 / sum(w_i**2) for normalised weights" if not np.isclose(val, 1 / expected)
                     else "you returned sum(w**2); N_eff is its reciprocal")
-            r.add(name, bool(np.isclose(val, expected, rtol=1e-9)), f"got {val:.6g}, expected {expected:.6g}", hint)
+            r.add(name, bool(np.isclose(val, expected, rtol=1e-9)), f"{val:.6g}", hint, expected=f"{expected:.6g}")
         raw = w * 8.0
         name = "normalises unnormalised weights first"
         val = float(np.reshape(_array(r, name, _call(r, name, fn, raw.copy())), -1)[0])
-        r.add(name, bool(np.isclose(val, 1.0 / float((w ** 2).sum()), rtol=1e-9)), f"got {val:.6g}",
-              "divide the weights by their sum before squaring: N_eff = (sum w)**2 / sum(w**2)")
+        r.add(name, bool(np.isclose(val, 1.0 / float((w ** 2).sum()), rtol=1e-9)), f"{val:.6g}",
+              "divide the weights by their sum before squaring: N_eff = (sum w)**2 / sum(w**2)",
+              expected=f"{1.0 / float((w ** 2).sum()):.6g}")
 
     return _run("effective_sample_size", body)
 
@@ -852,7 +857,7 @@ def mcl_step(fn: Callable) -> Report:
         # with a flat likelihood every surviving particle is one of the moved ones
         on_moved = np.mean([np.any(np.all(np.isclose(o, moved), axis=1)) for o in out[:200]])
         r.add("particles are moved by the motion model", bool(on_moved > 0.99), f"{on_moved:.0%} of particles moved",
-              "apply motion(particles, u, rng) to every particle before weighting")
+              "apply motion(particles, u, rng) to every particle before weighting", expected="100% moved")
 
         def sensor_right(p, ranges, angles):  # strongly prefers x > 5
             return np.where(p[:, 0] > 5.0, 0.0, np.log(0.25)) - 1500.0

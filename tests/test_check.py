@@ -525,3 +525,29 @@ def test_ekf_check_agrees_with_the_library_filter():
     np.testing.assert_allclose(f.mean[:2], mu[:2], atol=1e-9)
     assert abs(wrap_angle(f.mean[2] - mu[2])) < 1e-9
     np.testing.assert_allclose(f.cov, cov, atol=1e-9)
+
+
+def test_every_failure_with_a_seen_value_shows_the_expected_one():
+    """On failure a report puts the right answer next to the student's, for every check and mistake tested here."""
+    reports = [
+        check.normalize(lambda p: np.asarray(p, float)),
+        check.bayes_update(lambda b, lik: np.asarray(b) * np.asarray(lik)),
+        check.histogram_sense(lambda b, w, m, h, mi: histogram.sense(b, w, m, mi, h)),
+        check.histogram_move(lambda b, s, f: np.roll(b, s, axis=(0, 1))),
+        check.sample_odometry(_sampler(var_is_std=True)), check.sample_odometry(_sampler(spot_rule=False)),
+        check.odometry_pdf(_pdf(jacobian=False)), check.odometry_pdf(_pdf(wrap=False)),
+        check.beam_model(_beam(normalise=False)), check.beam_model(_beam(mass_only=True)),
+        check.scan_log_likelihood(_scan("sum")),
+        check.low_variance_sampler(_low_variance(wide_offset=True)),
+        check.low_variance_sampler(_low_variance(no_guard=True)),
+        check.effective_sample_size(lambda w: 1.0 / float(np.sum(np.square(w)))),
+        check.mcl_step(_mcl(move=False)), check.mcl_step(_mcl(weigh_first=True)),
+        check.world_to_cell(_world_to_cell(order="ji")), check.grid_update(_grid_update(roll=-1)),
+        check.map_image(_map_image(flip=False)), check.injection(_injection(upside_down=True)),
+        check.ekf_update(_ekf(inverse=False)),
+    ]
+    for r in reports:
+        assert not r, r
+        for v in r.failures:
+            assert not v.detail or v.expected, f"{r.subject}: {v.name!r} shows {v.detail!r} without the expected value"
+            assert "expected:" in str(r) or not v.detail
