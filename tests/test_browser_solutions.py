@@ -33,8 +33,9 @@ _JS_STATE = """() => {
         summary: (d.querySelector('summary') || {textContent: ''}).textContent,
         text: [...d.childNodes].filter(n => n.nodeName !== 'SUMMARY').map(n => n.textContent).join(' '),
         math: d.querySelectorAll('mjx-container').length,
-        visibleHeight: [...d.children].filter(c => c.tagName !== 'SUMMARY')
-                          .reduce((h, c) => h + c.getBoundingClientRect().height, 0),
+        // a closed <details> is as tall as its summary (its children may still report a layout size)
+        visibleHeight: d.getBoundingClientRect().height
+                       - (d.querySelector('summary') || d).getBoundingClientRect().height,
     }));
     const bars = [...nb.querySelectorAll('.jp-CodeCell .jp-InputPlaceholder')].map(e => e.textContent.trim());
     const outBars = nb.querySelectorAll('.jp-CodeCell .jp-OutputPlaceholder').length;
@@ -60,12 +61,14 @@ def test_solutions_collapsed_and_revealable_in_jupyterlab(page, artifacts):  # n
     page.wait_for_function("() => document.querySelectorAll('.jp-Notebook details mjx-container').length > 0",
                            timeout=KERNEL_TIMEOUT_MS)
     state = page.evaluate(_JS_STATE)
+    first_md = page.locator(".jp-Notebook .jp-MarkdownCell:has(details)").first
+    first_md.scroll_into_view_if_needed()
     page.screenshot(path=artifacts / "solutions-collapsed.png")
     assert not state["raw"], "raw MyST admonition markup is shown"
     assert len(state["md"]) == len(md), state
     for d, cell in zip(state["md"], md):
         assert not d["open"] and "Solution" in d["summary"], d
-        assert d["visibleHeight"] == 0, f"a closed solution shows content: {d}"
+        assert d["visibleHeight"] < 2, f"a closed solution shows content: {d}"
         assert "$" not in d["text"] and "**" not in d["text"], f"unrendered markdown or math: {d['text'][:200]}"
         assert ("$" in cell.source) == (d["math"] > 0), f"formulas not typeset: {d}"
     assert len(state["bars"]) == len(code), state
@@ -74,6 +77,9 @@ def test_solutions_collapsed_and_revealable_in_jupyterlab(page, artifacts):  # n
     # revealing: a click on a summary opens it, a click on a bar shows the code
     page.locator(".jp-Notebook .jp-MarkdownCell details summary").first.click()
     assert page.evaluate("() => document.querySelector('.jp-Notebook .jp-MarkdownCell details').open")
+    opened = page.evaluate("""() => { const d = document.querySelector('.jp-Notebook .jp-MarkdownCell details');
+        return d.getBoundingClientRect().height - d.querySelector('summary').getBoundingClientRect().height; }""")
+    assert opened > 20, f"an opened solution should show its text; height {opened}"
     n_bars = len(state["bars"])
     page.locator(".jp-Notebook .jp-CodeCell .jp-InputPlaceholder").first.click()
     page.wait_for_function(f"() => document.querySelectorAll('.jp-Notebook .jp-InputPlaceholder').length < {n_bars}")
