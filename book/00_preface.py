@@ -5,6 +5,8 @@
 #     text_representation:
 #       extension: .py
 #       format_name: percent
+#       format_version: '1.3'
+#       jupytext_version: 1.19.6
 #   kernelspec:
 #     display_name: Python 3 (ipykernel)
 #     language: python
@@ -227,6 +229,30 @@ robot_on_map(office, x=10.0, y=5.5, theta_deg=20.0)
 # %%
 fig = robot_on_map_figure(office, 10.0, 5.5, 20.0)
 plt.show()
+
+# %% [markdown]
+# ## Exercise: which cell is a point in?
+#
+# Write `world_to_cell(points, origin, resolution)`: for `(N, 2)` world points
+# $(x, y)$ return the **integer** `(row, column)` of the cell that holds each, by
+# the formula above (without calling `OccupancyGrid.world_to_cell`). Then run
+# `localize.check.world_to_cell(world_to_cell)`: it prints PASS or FAIL for each
+# property it tests, with a hint that names the usual mistake behind a failure
+# (rows and columns swapped, `round` instead of `floor`, the origin forgotten).
+# The code exercises of the chapters come with such self-checks, and the
+# homework notebook (`book/homework/homework.ipynb`) collects them.
+
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
+def world_to_cell(points, origin, resolution):
+    """(row, column) of the cell holding each (x, y) point."""
+    rel = (np.asarray(points, dtype=float) - np.asarray(origin, dtype=float)) / resolution
+    return np.floor(rel[:, ::-1]).astype(int)   # column from x, row from y
+
+
+print(localize.check.world_to_cell(world_to_cell))
+print("on the tiny map:", world_to_cell([[1.3, 1.8]], tiny.origin, tiny.resolution)[0],
+      "=", tiny.world_to_cell([1.3, 1.8]))
 
 # %% [markdown]
 # ## References

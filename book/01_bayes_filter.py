@@ -380,7 +380,8 @@ plt.show()
 #    5, 10 and 15 cycles, on average? How does this change for a sensor that is
 #    right 90 % of the time?
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 1
 w5 = np.array([1, 0, 0, 1, 0])
 b = discrete.update(discrete.uniform(5), np.where(w5 == 1, 0.8, 0.1))
@@ -388,8 +389,8 @@ print("(a)", b.round(4))     # doors 0.8*0.2 / (2*0.16 + 3*0.02) = 0.421, walls 
 print("(b)", discrete.predict(b, [0.1, 0.8, 0.1], offset=1).round(4))
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # By hand: after the reading the unnormalised values are $0.8 \cdot 0.2 = 0.16$
 # at the two doors and $0.1 \cdot 0.2 = 0.02$ at the three walls, total $0.38$;
@@ -397,9 +398,11 @@ print("(b)", discrete.predict(b, [0.1, 0.8, 0.1], offset=1).round(4))
 # cell's mass can come from. Cell 1, for example, is reached from cell 0 moving
 # one cell (0.8), from cell 1 staying (0.1) and from cell 4 overshooting by two
 # across the wrap (0.1): $0.8 \cdot 0.421 + 0.1 \cdot 0.053 + 0.1 \cdot 0.053 = 0.347$.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 2: stopping at the ends of a bounded hallway
 def predict_stop(belief, kernel, offset):
     belief = discrete.as_belief(belief)
@@ -416,7 +419,8 @@ b[17:] = [0.2, 0.3, 0.5]
 moved = predict_stop(b, kernel, 2)
 print(moved[15:].round(3), "sum", round(float(moved.sum()), 6))
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 3: belief near the truth after t cycles, averaged over 200 runs
 def belief_near_truth(p_sensor, rng, checkpoints=(5, 10, 15)):
     b, out = discrete.uniform(20), []
@@ -436,13 +440,14 @@ for p in [0.75, 0.9]:
     print(f"sensor right {p:.2f}: belief within one cell after 5/10/15 cycles: {mean.round(2)}")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # The better sensor concentrates the belief faster and further. Notice that
 # neither reaches certainty even after 15 cycles: the motion noise blurs the
 # belief at every step, and in this hallway long stretches of wall look alike.
-# ````
+#
+# </details>
 
 # %% [markdown]
 # ## References

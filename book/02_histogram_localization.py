@@ -430,7 +430,8 @@ plt.show()
 #    does it end on the true tile, and how many cell updates does it use,
 #    compared with the full grid?
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 1
 w = np.array([["red", "green", "green", "red"]])
 b = histogram.sense(discrete.uniform(w.shape), w, "green", 0.8, 0.2)
@@ -438,16 +439,18 @@ print("after sensing:", b.round(3))        # 0.8/2.0 = 0.4 on green, 0.2/2.0 = 0
 print("after moving :", histogram.move(b, "right", fill=0.0).round(3))
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # By hand: the unnormalised values are 0.2, 0.8, 0.8, 0.2 (times 1/4), total
 # 2.0/4, so the belief is 0.1, 0.4, 0.4, 0.1. Moving right drops the last 0.1 and
 # puts 0 in the first tile: 0, 0.1, 0.4, 0.4, which sums to 0.9; normalised
 # 0, 0.111, 0.444, 0.444.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 2
 def sense_confusion(belief, world, z, confusion):
     lik = np.vectorize(lambda colour: confusion[colour][z])(world)
@@ -460,7 +463,8 @@ u = discrete.uniform(world.shape)
 assert np.allclose(sense_confusion(u, world, "blue", conf), histogram.sense(u, world, "blue", 0.85, 0.15))
 print("sense_confusion agrees with histogram.sense")
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 3
 def trial(seed, threshold):
     rng = np.random.default_rng(seed)
@@ -480,14 +484,15 @@ for threshold in [0.5, 0.8, 0.95]:
     print(f"threshold {threshold:.2f}: right in {ok:.0%} of 20 cities, {cost / full_cost:.1%} of the full grid's work")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # A low threshold switches early and risks opening the window in the wrong
 # place, from which this simple localizer never recovers; a high one is safe in
 # these runs. The cost hardly depends on the threshold here, because the coarse
 # grid (900 blocks) and the window (900 tiles) happen to be the same size.
-# ````
+#
+# </details>
 
 # %% [markdown]
 # ## References

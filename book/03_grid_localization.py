@@ -342,7 +342,8 @@ for (factor, n_head), (build, per_step) in zip(configs, timings):
 #    the scans). How many steps does the grid filter need to find the robot
 #    again? What does the `min_sigma_xy` floor have to do with it?
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 1
 K16 = 16
 m_b = round(np.radians(45) / (2 * np.pi / K16))
@@ -350,16 +351,18 @@ print("beam offset in bins:", m_b, "-> table row", (3 + m_b) % K16)
 print("bin width 30° (12 bins): 45° / 30° =", 45 / 30, "-> not a whole number of bins")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # With 16 bins of 22.5°, 45° is exactly two bins, so the beam uses row
 # $(3 + 2) \bmod 16 = 5$. With bins of 30°, 20° or 10° (12, 18 or 36 bins), 45°
 # is not a whole number of bins and the beam falls between rows;
 # `GridLocalizer` then snaps it to the nearest bin, an error of up to half a bin.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 2
 def marginal_heading_plot(loc, ax):
     th = loc.theta
@@ -378,7 +381,8 @@ for t in range(17):
 fig.tight_layout()
 plt.show()
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 3: kidnapping after step 10
 kid_truth = truth.copy()
 kid_truth[11:, 0] += 6.5
@@ -398,8 +402,8 @@ for floor in [0.5, 2.0]:
     print(f"min_sigma_xy = {floor} cells: errors after the kidnap {np.round(errs[11:], 1)}")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # (All kidnapped poses are in free space, as printed.) The grid filter never
 # assigns exactly zero to a free bin, so it can recover — but only as fast as
@@ -407,7 +411,36 @@ for floor in [0.5, 2.0]:
 # wider motion blur (larger `min_sigma_xy`) keeps more belief spread over the map
 # and recovers in four, at the price of a vaguer estimate while tracking;
 # chapter 8 meets the same trade-off in MCL as random particle injection.
-# ````
+#
+# </details>
+
+# %% [markdown]
+# 4. **Implementation, self-checked.** Write the correction step yourself:
+#    `grid_update(belief, expected, beam_bins, ranges, beam_pdf)` multiplies a
+#    `(K, H, W)` belief by the likelihood of a scan and normalises. `expected[k, i, j]`
+#    is the range from cell $(i, j)$ along the *absolute* heading bin $k$; beam $b$,
+#    `beam_bins[b]` bins to the left of the robot's heading, therefore looks along
+#    bin `(k + beam_bins[b]) % K` for a robot in bin $k$ (what `GridLocalizer` does
+#    with its `np.roll` of the table). Test it with `check.grid_update(grid_update)`,
+#    which tries the classic mistakes: the beam offset forgotten or applied the
+#    wrong way, and a product of 360 beam likelihoods that underflows.
+
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
+from localize import check  # noqa: E402
+
+
+def grid_update(belief, expected, beam_bins, ranges, beam_pdf):
+    """Posterior of grid localization after one scan, computed in log space."""
+    k = np.arange(belief.shape[0])
+    log_lik = np.zeros(belief.shape)
+    for b, z in zip(beam_bins, ranges):
+        log_lik += np.log(beam_pdf(z, expected[(k + b) % len(k)]))
+    posterior = belief * np.exp(log_lik - log_lik.max())
+    return posterior / posterior.sum()
+
+
+print(check.grid_update(grid_update))
 
 # %% [markdown]
 # ## References

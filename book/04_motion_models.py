@@ -648,7 +648,8 @@ velocity_cloud_figure()
 #    $\alpha_1$ and $\alpha_3$ from the spread of the end poses, and compare
 #    with the hidden values.
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 1
 r1, t, r2 = motion.odometry_to_control([2, 1, 0], [3, 2, np.pi / 2])
 print(f"(a) rot1 = {r1:.4f} (pi/4), trans = {t:.4f} (sqrt 2), rot2 = {r2:.4f} (pi/4)")
@@ -659,8 +660,8 @@ dens = motion.odometry_pdf(end, ([2, 1, 0], [3, 2, np.pi / 2]), start, [0.1, 0.0
 print("(c) noise-free end pose", end.round(4), " density there", round(float(dens), 4))
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # (a) The displacement is $(1, 1)$, so $\delta_\text{rot1} = \operatorname{atan2}(1, 1) - 0 = \pi/4$,
 # $\delta_\text{trans} = \sqrt 2$, $\delta_\text{rot2} = \pi/2 - 0 - \pi/4 = \pi/4$.
@@ -673,9 +674,11 @@ print("(c) noise-free end pose", end.round(4), " density there", round(float(den
 # $\frac{1}{(2\pi)^{3/2}\,\sigma_\text{rot1}\sigma_\text{trans}\sigma_\text{rot2}}\cdot\frac{1}{\sqrt 2}
 # = \frac{1}{15.75 \cdot 0.0310}\cdot 0.7071 \approx 1.45$ per m² rad
 # (the wrapped-normal images and the backwards branch add a little).
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 2
 def sample_forward_turn(poses, d, sigma_d, sigma_heading, sigma_final, rng):
     eps = rng.standard_normal((len(poses), 3))
@@ -701,16 +704,18 @@ print("means", ours.mean(axis=0).round(4), theirs.mean(axis=0).round(4))
 print("max |cov difference|", float(np.abs(np.cov(ours.T) - np.cov(theirs.T)).max().round(6)))
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # The heading noise is $\delta_\text{rot1}$'s noise, the distance noise is
 # $\delta_\text{trans}$'s and the final turn is $\delta_\text{rot2}$'s, with
 # constant standard deviations instead of ones that scale with the motion.
 # The covariances agree to within sampling error (below $10^{-4}$ here).
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 3
 rng_robot = np.random.default_rng(99)
 hidden = [0.03, 0.002, 0.01, 0.005]
@@ -725,8 +730,8 @@ print(f"alpha3: estimated {alpha3_hat:.4f}, hidden {hidden[2]}")
 print("relative standard error with 200 runs: about", round(math.sqrt(2 / 200), 2))
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # Each manoeuvre isolates one alpha: a straight drive has
 # $\delta_\text{rot1} = \delta_\text{rot2} = 0$, so the distance noise has variance
@@ -739,4 +744,5 @@ print("relative standard error with 200 runs: about", round(math.sqrt(2 / 200), 
 # motion-capture system, or marks on the floor), and systematic errors (a
 # wheel diameter that is off) should be calibrated out first (Borenstein et
 # al. 1996), because the alphas describe only the random part.
-# ````
+#
+# </details>

@@ -300,6 +300,29 @@ for zstar in (0.05, 5.0, MAX_RANGE):
           f"= {cont + beam.z_max:.6f}")
 
 # %% [markdown]
+# **A reading at max range** is where a density and a point mass meet. The
+# reading $z = z_\text{max}$ ("no return") has a probability of its own, the mass
+# $z_\text{max}$, while the continuous parts give any single reading probability
+# zero. A likelihood, though, only compares hypotheses for the *same* reading, and
+# PR's table 6.1 adds all four terms at every $z$; `BeamModel`, the self-check
+# `check.beam_model` and the homework follow it:
+# $p(z_\text{max} \mid z^*) = z_\text{hit}\,p_\text{hit}(z_\text{max} \mid z^*) +
+# z_\text{short}\,p_\text{short}(z_\text{max} \mid z^*) + z_\text{max}$ (the uniform
+# part stops below $z_\text{max}$), and a reading beyond $z_\text{max}$ counts as
+# $z_\text{max}$. A beam expected to hit a wall well inside the range scores about
+# the mass alone; a beam expected to fly into open space ($z^* = z_\text{max}$) has
+# half of its truncated hit Gaussian at $z_\text{max}$ and scores far more, so a
+# particle that expects open space where the laser saw none is rewarded (ROS
+# AMCL's beam model does the same). Adding a mass to a density mixes units, but it
+# changes no integral (a point has no width), and every particle is scored the
+# same way for the same reading, so the weights stay comparable:
+
+# %%
+for zstar in (5.0, MAX_RANGE):
+    print(f"p(z = max range | z* = {zstar:4.1f} m) = {float(beam.pdf(MAX_RANGE, zstar)):.3f}"
+          f"  (of which the mass z_max = {beam.z_max:.2f})")
+
+# %% [markdown]
 # Sampling from the model (what the simulator of the particle-filter
 # chapters does) first picks a cause with the mixture weights, then draws
 # from it by inverting its cumulative distribution. The histogram of 200,000
@@ -670,7 +693,8 @@ plt.show()
 #    ESS as 10 beams. What does that say about how many "independent" beams
 #    the 61 are worth?
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 1
 m = BeamModel(None, 10.0, 0.8, 0.1, 0.05, 0.05, sigma_hit=0.2, lambda_short=0.5)
 p = m.pdf([3.0, 2.0, 10.0], 3.0)
@@ -680,8 +704,8 @@ g = BeamModel(None, 10.0, 1.0, 0.0, 0.0, 0.0, sigma_hit=0.2)
 print(f"    plain Gaussian: drops by {float(g.beam_log_pdf(3.0, [[3.0]])[0, 0] - g.beam_log_pdf(2.0, [[3.0]])[0, 0]):.2f}")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # (a) At $z = z^* = 3$: the hit term is $0.8 \cdot \frac{1}{0.2\sqrt{2\pi}} = 0.8 \cdot 1.995 = 1.596$
 # ($\eta = 1$ to many digits), the short term $0.1 \cdot 0.5 e^{-1.5} / (1 - e^{-1.5}) = 0.0144$,
@@ -692,9 +716,11 @@ print(f"    plain Gaussian: drops by {float(g.beam_log_pdf(3.0, [[3.0]])[0, 0] -
 # four good beams. Under the plain Gaussian the drop is $\frac12 (1/0.2)^2 = 12.5$ nats; with a
 # 3 m short reading it would be $112.5$, which no number of good beams at other poses can
 # compensate in a close comparison.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 2
 def plain_march(grid, x, y, angle, max_range):
     t, res = 0.0, grid.resolution
@@ -719,8 +745,8 @@ exact_r = np.array([cast_ray(ex_map, *p, 6.0) for p in ex_poses])
 print(f"plain marcher off by more than one cell on {np.mean(np.abs(plain - exact_r) > 0.1):.0%} of rays")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # The plain marcher overshoots: the distance field holds distances between cell *centres*,
 # so a step of $d$ from a point that is not a centre can cut the corner of an obstacle cell
@@ -729,9 +755,11 @@ print(f"plain marcher off by more than one cell on {np.mean(np.abs(plain - exact
 # slip through a corner and read a far wall. `localize` steps only by the distance between
 # the cell *squares* (the clearance field, which never cuts a corner) and, when that is small,
 # by the cell walk's step to the next boundary, so it visits the cells the exact walk visits.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 3
 scans = world_beam.sample(np.repeat(true_pose[None], 5, axis=0), angles, np.random.default_rng(31))
 
@@ -751,8 +779,8 @@ print(f"61 beams tempered by {best:.3f} give mean ESS {mean_ess(beam, best):.1f}
 print(f"61 beams x {best:.3f} = {61 * best:.1f} 'independent' beams")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # The ESS grows as beams are dropped, and tempering the full scan by a factor $\gamma$ has a
 # similar effect. The $\gamma$ that matches 10 beams need not be $10/61$: the ESS of one cloud
@@ -762,4 +790,5 @@ print(f"61 beams x {best:.3f} = {61 * best:.1f} 'independent' beams")
 # independent beams the tempered scan is treated as. On real data the right $\gamma$ is found by
 # experiment (the MCL chapters), since it depends on how correlated the beams' errors really
 # are: a map error seen by 20 neighbouring beams is one piece of evidence, not twenty.
-# ````
+#
+# </details>

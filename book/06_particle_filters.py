@@ -696,7 +696,8 @@ sir_figure()
 #    multinomial instead of systematic resampling. What do you expect, and what
 #    do you see?
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 1
 w_ex = np.array([0.1, 0.2, 0.3, 0.4])
 print(f"(a) N_eff = 1 / sum w^2 = 1 / {np.sum(w_ex ** 2):.2f} = {1 / np.sum(w_ex ** 2):.4f}")
@@ -708,8 +709,8 @@ print(f"(c) multinomial: mean {4 * 0.4:.1f}, variance {4 * 0.4 * 0.6:.2f};"
       f" systematic: 1 or 2 copies, P(2) = 0.6 -> mean 1.6, variance {0.6 * 0.4:.2f}")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # (a) $\sum w_i^2 = 0.01 + 0.04 + 0.09 + 0.16 = 0.30$, so $N_\text{eff} = 3.33$.
 # The mean weight is $0.25$ and $\operatorname{Var}(w) = (0.0225 + 0.0025 + 0.0025 +
@@ -724,9 +725,11 @@ print(f"(c) multinomial: mean {4 * 0.4:.1f}, variance {4 * 0.4 * 0.6:.2f};"
 # $N w (1 - w) = 0.96$. Systematic: pointers are $1/N$ apart and particle 3's
 # segment is $1.6/N$ long, so it holds one or two pointers; the mean must be 1.6,
 # so $P(2) = 0.6$, and the variance is $0.6 \cdot 0.4 = 0.24$, four times less.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 2
 def residual_fixed(weights, rng):
     w = np.asarray(weights, dtype=float)
@@ -748,7 +751,8 @@ z = np.abs(mean - 4 * w4) / np.sqrt(np.maximum(var, 1 / 20_000) / 20_000)
 print("mean offspring", mean.round(3), " expected", 4 * w4, " z-scores", z.round(2))
 print("unbiased (all z < 5):", bool(np.all(z < 5)))
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 3
 def tv_at(n, seed, resampler, k=10):
     rng_x = np.random.default_rng(seed)
@@ -771,12 +775,13 @@ fig.tight_layout()
 plt.show()
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # Both lines have slopes near $-1/2$: Monte Carlo error shrinks like
 # $1/\sqrt{N}$ (for the smallest $N$ the distance saturates, which flattens the fit
 # a little). Multinomial resampling adds more noise at every step, so its line lies
 # above the systematic one by a roughly constant factor: the same accuracy costs
 # more particles. Choosing the resampler changes the constant, not the rate.
-# ````
+#
+# </details>

@@ -392,14 +392,16 @@ plt.show()
 # success: tempering or the number of beams? Explain with the overconfidence
 # argument.
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 1
 lw = np.array([-1002.0, -1000.0, -1003.0])
 m = lw.max()
 w = np.exp(lw - m) / np.exp(lw - m).sum()
 print("weights:", w.round(4), " naive exp:", np.exp(lw), " N_eff:", round(1 / np.sum(w**2), 3))
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 2: the textbook loop with localize's parts
 from localize.resample import systematic  # noqa: E402
 
@@ -418,7 +420,8 @@ for k in range(len(run)):
 mine = estimate_pose(parts, np.exp(logw)).pose
 print("my final estimate:", mine.round(2), " MCL:", trace.poses[-1].round(2), " truth:", run.poses[-1].round(2))
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 3: tempering versus the number of beams (1000 and 3000 particles, 20 runs each)
 variants = {
     "temper 0.05, 36 beams (the chapter's)": beam,

@@ -400,7 +400,8 @@ plt.show()
 # range, so that the tie-breaking box is seen only near its corner, and
 # compare plain MCL with augmented MCL.)
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 1
 w_slow = w_fast = 1.0
 for step in (1, 2, 3):
@@ -408,7 +409,8 @@ for step in (1, 2, 3):
     w_fast += 0.5 * (0.01 - w_fast)
     print(f"step {step}: w_slow = {w_slow:.4f}, w_fast = {w_fast:.4f}, p_inject = {max(0, 1 - w_fast / w_slow):.3f}")
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 2
 from localize.kld import bin_keys, kld_sample_size  # noqa: E402
 
@@ -424,7 +426,8 @@ for n, key in enumerate(keys.tolist(), start=1):
         break
 print("loop:", n_needed, " localize:", kld_sample_size(draws, (0.5, 0.5, np.radians(10)), n_min=300))
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Exercise 3
 final_share = []
 for seed in range(8):
@@ -438,3 +441,38 @@ print("share of the true mode after 40 steps:", np.round(final_share, 2))
 # Resampling less often removes one source of drift, but not the other: the two modes are made of different
 # particles, so each scan favours one of them slightly, by chance, and the product of these likelihood ratios
 # (the weights, carried from step to step) wanders away from 1 just the same. The belief still ends unimodal.
+
+# %% [markdown]
+# **4 (implementation, self-checked).** Write augmented MCL's bookkeeping,
+# `injection(likelihoods, w_slow, w_fast, alpha_slow, alpha_fast)`: from the
+# measurement likelihoods $p(z_t \mid x_t^{[i]})$ of the particles, update the two
+# averages and return `(w_slow, w_fast, p_inject)` (PR table 8.3). Test it with
+# `check.injection(injection)`. Why must $w_\text{avg}$ average the raw
+# likelihoods and not the normalised weights?
+
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
+from localize import check  # noqa: E402
+
+
+def injection(likelihoods, w_slow, w_fast, alpha_slow, alpha_fast):
+    """Update w_slow and w_fast with the mean likelihood; inject with probability max(0, 1 - w_fast / w_slow)."""
+    w_avg = float(np.mean(likelihoods))
+    w_slow += alpha_slow * (w_avg - w_slow)
+    w_fast += alpha_fast * (w_avg - w_fast)
+    return w_slow, w_fast, max(0.0, 1.0 - w_fast / w_slow)
+
+
+print(check.injection(injection))
+
+# %% [markdown] tags=["solution"]
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
+#
+# Normalised weights sum to one, so their average is $1/N$ whatever the scan:
+# $w_\text{slow}$ and $w_\text{fast}$ would both settle at $1/N$ and nothing would
+# ever be injected. The raw likelihoods fall when the scans stop fitting the
+# particles, which is exactly the signal augmented MCL needs. (`localize.mcl` keeps
+# the same averages in log space, since a scan's likelihood underflows.)
+#
+# </details>

@@ -643,7 +643,8 @@ print("within 0.5 m of the truth from scan", k0, f"| median APE afterwards {np.m
 # matters more on the real Intel log (the text below the solution gives
 # numbers measured there).
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Solution 1. Text line 41 is x cell 40; values 101..103 are y cells 100..102.
 x_cell, y_cells = 40, np.array([100, 101, 102])
 centres = np.column_stack([np.full(3, (x_cell + 0.5) * 0.1), (y_cells + 0.5) * 0.1])
@@ -654,7 +655,8 @@ print("stored occupancy:", occ.round(2).tolist(), "at grid.data[i=y, j=x] =", [(
 print("beam 46 points at", -90 + 45, "degrees, i.e. 45 degrees to the robot's right")
 
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Solution 2.
 def read_xy_log(path):
     times, odo, ranges = [], [], []
@@ -689,7 +691,8 @@ try:
 except io.FormatError as e:
     print("rejected:", hide(e))
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # Solution 3.
 for temper in (1.0, 0.05):
     steps = []
@@ -716,3 +719,31 @@ for temper in (1.0, 0.05):
 # alternatives until they are really ruled out. Too small a factor and the
 # filter converges slowly and tracks loosely: it is a dial between over- and
 # under-confidence.
+
+# %% [markdown]
+# **4 (implementation, self-checked).** The ROS map trap in code: write
+# `map_image(image, negate)` that turns a `map_server` picture (an `(H, W)` array
+# of grey values as stored in the PGM file) into occupancy in `localize`'s
+# convention: 1.0 occupied, 0.0 free, NaN unknown, by the trinary rule and the
+# default thresholds of this chapter, and with row 0 at the *bottom*. Test it with
+# `check.map_image(map_image)`; it tries the picture upside down, white read as
+# occupied, `negate` ignored and unknown cells made free.
+
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
+from localize import check  # noqa: E402
+
+
+def map_image(image, negate):
+    """Occupancy of a map_server picture (trinary, default thresholds), row 0 = the bottom of the map."""
+    v = np.asarray(image, dtype=float)
+    p = v / 255.0 if negate else (255.0 - v) / 255.0
+    occupancy = np.full(p.shape, np.nan)
+    occupancy[p > 0.65] = 1.0
+    occupancy[p < 0.196] = 0.0
+    return np.flipud(occupancy)
+
+
+print(check.map_image(map_image))
+mine = map_image(io.read_pgm(folder / "grey.pgm"), negate=False)
+print("agrees with io.read_map on grey.yaml:", bool(np.array_equal(mine, strict.data, equal_nan=True)))

@@ -583,8 +583,8 @@ plt.show()
 # does it converge from its random guess, and why?
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # **Solution 1.** $\delta = (3, 4)$, $r = 5$, $q = 25$. Range $5$, bearing
 # $\operatorname{atan2}(4, 3) - \pi/2 = 0.9273 - 1.5708 = -0.6435$ rad.
@@ -596,9 +596,11 @@ plt.show()
 # bearing. A measurement is informative exactly when that share is large (the
 # gain $K = \bar\Sigma H^\top S^{-1}$ is then large), so both are, the bearing
 # marginally more.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 pose, m = np.array([1.0, 1.0, np.pi / 2]), np.array([4.0, 5.0])
 H = landmark_jacobian(pose, m)
 S = H @ np.diag([0.25, 0.25, 0.01]) @ H.T + np.diag([0.04, 0.0025])
@@ -607,8 +609,8 @@ print("H =\n", H.round(4))
 print("S =\n", S.round(4) + 0.0)
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # **Solution 2.** A subclass that gates each sighting before the update. After a
 # kidnapping almost every sighting is an "outlier" for the old belief, so the
@@ -616,9 +618,11 @@ print("S =\n", S.round(4) + 0.0)
 # wrong place, but it never recovers either. Gating protects against spurious
 # sightings and wrong associations while tracking; it cannot help with a lost
 # robot.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 class GatedEKF(EKFLocalizer):
     """EKF localization that skips sightings outside the 99% innovation gate."""
 
@@ -649,8 +653,8 @@ for seed in range(10):
 print(f"gated EKF lost after the kidnapping in {lost} of 10 seeds")
 
 # %% [markdown] tags=["solution"]
-# ````{admonition} Solution
-# :class: dropdown, tip
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
 #
 # **Solution 3.** With few particles and the exact sensor model, almost no
 # particle starts close enough to the truth to survive the first sightings;
@@ -663,9 +667,11 @@ print(f"gated EKF lost after the kidnapping in {lost} of 10 seeds")
 # so the EKF's first updates drag its mean close to the truth from almost any
 # guess — global localization is hard for the EKF because of data association,
 # not because of the Gaussian alone.
-# ````
+#
+# </details>
 
-# %% tags=["solution", "hide-cell", "nbval-ignore-output"]
+# %% tags=["solution", "hide-cell", "nbval-ignore-output"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 rates = {}
 for n in (100, 300, 1000):
     for infl in (1.0, 2.0):
@@ -680,6 +686,33 @@ print(f"EKF with identified landmarks from a random guess: fails {100 * mc.metri
 assert C.rates_differ(rates[100, 1.0], rates[1000, 2.0], 10)          # few particles, exact model: worst
 assert rates[1000, 2.0] <= C.rate_tolerance(10, 0.0)                    # many, inflated: (almost) never fails
 assert mc.metrics["EKF"].failure_rate <= C.rate_tolerance(10, 0.0)      # identified landmarks: the EKF converges
+
+# %% [markdown]
+# **4 (implementation, self-checked).** Write one EKF correction,
+# `ekf_update(mean, cov, z, landmark, Q)`, for a range-bearing sighting `z` of
+# the landmark at `landmark` (PR table 7.2, lines 12-21, for one landmark; use
+# `landmark_measurement` and `landmark_jacobian`). Test it with
+# `check.ekf_update(ekf_update)`; one of its cases sees a landmark behind the
+# robot, where the bearing innovation crosses $\pm\pi$.
+
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
+from localize import check  # noqa: E402
+
+
+def ekf_update(mean, cov, z, landmark, Q):
+    """EKF measurement update with one range-bearing sighting."""
+    H = landmark_jacobian(mean, landmark)
+    S = H @ cov @ H.T + Q
+    K = cov @ H.T @ np.linalg.inv(S)
+    innovation = np.asarray(z, dtype=float) - landmark_measurement(mean, landmark)
+    innovation[1] = localize.wrap_angle(innovation[1])
+    new_mean = mean + K @ innovation
+    new_mean[2] = localize.wrap_angle(new_mean[2])
+    return new_mean, (np.eye(3) - K @ H) @ cov
+
+
+print(check.ekf_update(ekf_update))
 
 # %% [markdown]
 # ## References

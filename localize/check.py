@@ -3,7 +3,10 @@
 Each ``check.<name>(fn)`` takes a function you wrote, runs it on cases with
 known answers, and returns a :class:`Report`. The report is truthy when every
 property holds, prints one line per property (``PASS`` / ``FAIL``) and, for
-each failure, a hint that names the usual mistake behind it. A check never
+each failure, what your function gave (``seen``) next to the right answer
+(``expected``) and a hint. A hint that names a particular mistake is given
+only when your result is what that mistake produces; otherwise the hint
+restates the rule. A check never
 crashes on a wrong answer: exceptions, wrong types and wrong shapes become
 failed properties.
 
@@ -42,6 +45,11 @@ check                      your function
 ``low_variance_sampler``   ``fn(weights, rng) -> indices``
 ``effective_sample_size``  ``fn(weights) -> float``
 ``mcl_step``               ``fn(particles, u, ranges, angles, motion, sensor, rng) -> (N, 3)``
+``world_to_cell``          ``fn(points, origin, resolution) -> (N, 2)`` integer ``(row, col)``
+``grid_update``            ``fn(belief, expected, beam_bins, ranges, beam_pdf) -> (K, H, W)``
+``map_image``              ``fn(image, negate) -> occupancy`` (row 0 at the bottom, NaN unknown)
+``injection``              ``fn(likelihoods, w_slow, w_fast, alpha_slow, alpha_fast) -> (w_slow, w_fast, p)``
+``ekf_update``             ``fn(mean, cov, z, landmark, Q) -> (mean, cov)``
 =========================  ====================================================
 
 ``params`` for the beam model is a dict with keys ``z_hit, z_short, z_max,
@@ -73,6 +81,12 @@ __all__ = [
     "low_variance_sampler",
     "effective_sample_size",
     "mcl_step",
+    "world_to_cell",
+    "grid_update",
+    "map_image",
+    "injection",
+    "ekf_update",
+    "ODOMETRY_CASES",
 ]
 
 #: Beam-model parameters used by :func:`beam_model` and :func:`scan_log_likelihood`.
@@ -90,6 +104,7 @@ class Verdict:
     passed: bool
     detail: str = ""
     hint: str = ""
+    expected: str = ""
 
 
 @dataclass
@@ -103,8 +118,9 @@ class Report:
     subject: str
     verdicts: list[Verdict] = field(default_factory=list)
 
-    def add(self, name: str, passed: bool, detail: str = "", hint: str = "") -> bool:
-        self.verdicts.append(Verdict(name, bool(passed), detail, "" if passed else hint))
+    def add(self, name: str, passed: bool, detail: str = "", hint: str = "", expected: str = "") -> bool:
+        """Record one property; ``detail`` is what the student's function gave, ``expected`` the right answer."""
+        self.verdicts.append(Verdict(name, bool(passed), detail, "" if passed else hint, expected))
         return bool(passed)
 
     @property
@@ -132,9 +148,11 @@ class Report:
             lines.append(f"  {'PASS' if v.passed else 'FAIL'}  {v.name}")
             if not v.passed:
                 if v.detail:
-                    lines.append(f"        seen: {v.detail}")
+                    lines.append(f"        seen:     {v.detail}")
+                if v.expected:
+                    lines.append(f"        expected: {v.expected}")
                 if v.hint:
-                    lines.append(f"        hint: {v.hint}")
+                    lines.append(f"        hint:     {v.hint}")
         return "\n".join(lines)
 
     __repr__ = __str__
@@ -174,8 +192,9 @@ def _array(report: Report, name: str, value: Any, shape: tuple | None = None,
         report.add(name, False, "returned a ragged or object array", "return a NumPy array of numbers")
         raise _Stop
     if shape is not None and a.shape != tuple(shape):
-        report.add(name, False, f"returned shape {a.shape}, expected {tuple(shape)}",
-                   "keep one entry per input element (check which axis you sum or index over)")
+        report.add(name, False, f"returned shape {a.shape}",
+                   "keep one entry per input element (check which axis you sum or index over)",
+                   expected=f"shape {tuple(shape)}")
         raise _Stop
     return a
 
@@ -213,18 +232,18 @@ def normalize(fn: Callable) -> Report:
         total = float(np.sum(out))
         r.add("the result sums to one", abs(total - 1.0) < 1e-9, f"sum = {total:.6g}",
               "you returned the input unchanged: divide by the sum" if np.allclose(out, kept)
-              else "divide every entry by the sum of all entries (eta = 1 / sum)")
+              else "divide every entry by the sum of all entries (eta = 1 / sum)", expected="sum = 1")
         r.add("the result is proportional to the input", np.allclose(out * kept.sum(), kept, rtol=1e-9),
-              f"got {_fixed(out)}, expected {_fixed(kept / kept.sum())}",
-              "each entry must become p_i / sum(p): no softmax, no subtracting the mean")
+              _fixed(out), "each entry must become p_i / sum(p): no softmax, no subtracting the mean",
+              expected=_fixed(kept / kept.sum()))
         r.add("the input array is left unchanged", np.array_equal(p, kept), f"input became {_fixed(p)}",
               "return p / p.sum() instead of dividing in place with p /= p.sum()")
         q = np.arange(1.0, 7.0).reshape(2, 3)
         out2 = _array(r, "works on a 2-D belief (sums over all cells)", _call(r, "runs on a 2-D array", fn, q),
                       q.shape)
         r.add("works on a 2-D belief (sums over all cells)", np.allclose(out2, q / q.sum(), rtol=1e-9),
-              f"got {_fixed(out2)}",
-              "sum over all cells with p.sum(), not along one axis (p.sum(axis=0))")
+              _fixed(out2), "sum over all cells with p.sum(), not along one axis (p.sum(axis=0))",
+              expected=_fixed(q / q.sum()))
 
     return _run("normalize", body)
 
@@ -243,7 +262,7 @@ def bayes_update(fn: Callable) -> Report:
                      prior.shape)
         r.add("returns one probability per cell", True)
         r.add("the posterior sums to one", abs(float(out.sum()) - 1.0) < 1e-9, f"sum = {float(out.sum()):.6g}",
-              "after multiplying, divide by the sum (the normaliser eta of Bayes rule)")
+              "after multiplying, divide by the sum (the normaliser eta of Bayes rule)", expected="sum = 1")
         prod = prior * lik
         add = prior + lik
         ok = np.allclose(out, expected, rtol=1e-8, atol=1e-12)
@@ -257,8 +276,7 @@ def bayes_update(fn: Callable) -> Report:
             hint = "you ignored the prior belief: multiply the likelihood by the belief"
         else:
             hint = "posterior(x) = likelihood(x) * belief(x) / sum over x of the same product"
-        r.add("the posterior is eta * likelihood * belief", ok, f"got {_fixed(out)}, expected {_fixed(expected)}",
-              hint)
+        r.add("the posterior is eta * likelihood * belief", ok, _fixed(out), hint, expected=_fixed(expected))
         r.add("the inputs are left unchanged", np.array_equal(prior, keep_p) and np.array_equal(lik, keep_l),
               "", "compute a new array instead of modifying belief or likelihood in place")
 
@@ -273,6 +291,17 @@ def histogram_sense(fn: Callable) -> Report:
     """Check ``fn(belief, world, measurement, p_hit, p_miss)`` against :func:`localize.histogram.sense`."""
     from . import histogram
 
+    def diagnose(out: NDArray, prior: NDArray, world: NDArray, m: str) -> str:
+        """Name the mistake whose result ``out`` reproduces (each candidate tested, not guessed)."""
+        uniform = np.full(world.shape, 1.0 / world.size)
+        if np.allclose(out, histogram.sense(prior, world, m, 0.15, 0.85), rtol=1e-8):
+            return "you swapped p_hit and p_miss: tiles whose colour MATCHES the measurement get p_hit"
+        if np.allclose(out, histogram.sense(uniform, world, m, 0.85, 0.15), rtol=1e-8):
+            return "multiply the PRIOR by the likelihood; do not start from a uniform belief"
+        if np.allclose(out, prior * np.where(world == m, 0.85, 0.15), rtol=1e-8):
+            return "the product is right but not normalised: divide by its sum"
+        return "multiply by p_hit where world == measurement, by p_miss elsewhere, then normalise"
+
     def body(r: Report) -> None:
         world = _tile_world()
         prior = np.full(world.shape, 1.0 / world.size)
@@ -281,20 +310,18 @@ def histogram_sense(fn: Callable) -> Report:
                      _call(r, "runs on a 4 x 5 tile world", fn, prior.copy(), world, "R", 0.85, 0.15), world.shape)
         r.add("returns a belief of the world's shape", True)
         r.add("the belief sums to one", abs(float(out.sum()) - 1.0) < 1e-9, f"sum = {float(out.sum()):.6g}",
-              "normalise after multiplying by p_hit / p_miss")
-        swapped = histogram.sense(prior, world, "R", 0.15, 0.85)
+              "normalise after multiplying by p_hit / p_miss", expected="sum = 1")
         ok = np.allclose(out, expected, rtol=1e-8)
-        hint = ("you swapped p_hit and p_miss: tiles whose colour MATCHES the measurement get p_hit"
-                if np.allclose(out, swapped, rtol=1e-8)
-                else "multiply by p_hit where world == measurement, by p_miss elsewhere, then normalise")
-        r.add("matching tiles gain, others lose (Bayes rule)", ok, f"got {_fixed(out)}", hint)
+        r.add("matching tiles gain, others lose (Bayes rule)", ok, _fixed(out),
+              "" if ok else diagnose(out, prior, world, "R"), expected=_fixed(expected))
         prior2 = np.zeros(world.shape)
         prior2[1, 1] = prior2[2, 2] = 0.5
         exp2 = histogram.sense(prior2, world, "B", 0.85, 0.15)
-        out2 = _array(r, "uses the prior belief", _call(r, "runs on a peaked prior", fn, prior2, world, "B", 0.85,
-                                                        0.15), world.shape)
-        r.add("uses the prior belief", np.allclose(out2, exp2, rtol=1e-8), f"got {_fixed(out2)}",
-              "multiply the PRIOR by the likelihood; do not start from a uniform belief")
+        out2 = _array(r, "uses the prior belief", _call(r, "runs on a peaked prior", fn, prior2.copy(), world, "B",
+                                                        0.85, 0.15), world.shape)
+        ok2 = np.allclose(out2, exp2, rtol=1e-8)
+        r.add("uses the prior belief", ok2, _fixed(out2), "" if ok2 else diagnose(out2, prior2, world, "B"),
+              expected=_fixed(exp2))
 
     return _run("histogram_sense", body)
 
@@ -330,23 +357,40 @@ def histogram_move(fn: Callable) -> Report:
             else:
                 hint = ("shift by the step (drow, dcol), put `fill` on the tiles uncovered at the edge, "
                         "then normalise")
-            r.add(name, False, f"got {_fixed(out)}", hint)
+            r.add(name, False, _fixed(out), hint, expected=_fixed(exp))
 
     return _run("histogram_move", body)
 
 
 # ---------------------------------------------------------------------------- motion
+#: Odometry pairs ``(prev_odom, odom)`` that :func:`sample_odometry` tests, with what each one catches.
+ODOMETRY_CASES: list[tuple[str, tuple[NDArray, NDArray], str]] = [
+    ("a forward move with a turn", (np.array([1.0, 2.0, 0.3]), np.array([1.8, 2.9, 1.1])),
+     "rot1 noise variance = a1*rot1**2 + a2*trans**2, trans: a3*trans**2 + a4*(rot1**2 + rot2**2), "
+     "rot2: a1*rot2**2 + a2*trans**2 (PR table 5.6)"),
+    ("a turn on the spot (no translation)", (np.array([1.0, 2.0, 2.5]), np.array([1.0, 2.0, -2.9])),
+     "without translation atan2(0, 0) is meaningless: set rot1 = 0 and rot2 = the whole (wrapped) heading "
+     "change when trans is (nearly) zero, as chapter 4 does; otherwise rot1 = -theta gets the noise a1*theta**2"),
+    ("a move backwards", (np.array([0.0, 0.0, -3.0]), np.array([0.8, 0.25, -3.05])),
+     "driving backwards gives rot1 and rot2 near +-pi: wrap rot1 = atan2(dy, dx) - theta and "
+     "rot2 = theta' - theta - rot1 to [-pi, pi) BEFORE computing the noise variances"),
+]
+
+
 def sample_odometry(fn: Callable) -> Report:
     """Check ``fn(poses, u, alphas, rng)`` samples the odometry motion model (PR table 5.6).
 
     The distribution is compared with :func:`localize.motion.sample_odometry`
-    (noise variances ``alpha1*rot1**2 + alpha2*trans**2`` etc.).
+    (noise variances ``alpha1*rot1**2 + alpha2*trans**2`` etc.) for each of
+    the motions in :data:`ODOMETRY_CASES`: a forward move with a turn, a turn
+    on the spot (no translation: ``rot1 = 0``) and a move backwards (``rot1``
+    near pi, wrapped).
     """
     from . import motion
     from .geometry import angle_diff
 
     def body(r: Report) -> None:
-        u = (np.array([1.0, 2.0, 0.3]), np.array([1.8, 2.9, 1.1]))
+        u = ODOMETRY_CASES[0][1]
         start = np.array([[0.5, -0.5, 2.9], [3.0, 1.0, -2.0], [0.0, 0.0, 0.0]])
         exact = motion.sample_odometry(start, u, [0, 0, 0, 0], np.random.default_rng(0))
         name = "no noise (alphas = 0) reproduces the motion exactly"
@@ -361,43 +405,48 @@ def sample_odometry(fn: Callable) -> Report:
         else:
             hint = ("rot1 = atan2(y'-y, x'-x) - theta, trans = distance, rot2 = theta' - theta - rot1 "
                     "from the two odometry poses; angles are radians (no np.degrees / np.radians)")
-        r.add(name, ok, f"max position error {dpos:.3g} m, heading error {dth:.3g} rad", hint)
+        r.add(name, ok, _fixed(out), hint, expected=_fixed(exact))
         wrapped = np.all((out[:, 2] >= -np.pi) & (out[:, 2] < np.pi))
         r.add("headings are wrapped to [-pi, pi)", wrapped, f"headings {_fixed(out[:, 2])}",
-              "wrap the new heading with localize.wrap_angle (or (a + pi) % (2 pi) - pi)")
+              "wrap the new heading with localize.wrap_angle (or (a + pi) % (2 pi) - pi)",
+              expected=f"headings {_fixed(exact[:, 2])}")
 
         n = 40_000
         alphas = np.array([0.05, 0.01, 0.02, 0.05])
-        name = "samples have the model's mean and covariance"
-        got = _array(r, name, _call(r, name, fn, np.zeros((n, 3)), u, alphas, np.random.default_rng(1)), (n, 3))
-        ref = motion.sample_odometry(np.zeros((400_000, 3)), u, alphas, np.random.default_rng(2))
-
-        def feats(p):  # unwrap headings around the reference mean
-            m = float(np.angle(np.exp(1j * ref[:, 2]).mean()))
-            return np.column_stack([p[:, 0], p[:, 1], m + angle_diff(p[:, 2], m)])
-
-        fg, fr = feats(got), feats(ref)
-        sd = fr.std(axis=0)
-        mean_err = np.abs(fg.mean(axis=0) - fr.mean(axis=0)) / (sd / math.sqrt(n))
-        var_ratio = fg.var(axis=0) / fr.var(axis=0)
         # the sample variance has relative standard error sqrt(2/n) (plus the
         # kurtosis of a curved distribution): allow 8 of them
         var_tol = 8.0 * math.sqrt(2.0 / n) + 0.02
-        ok_mean = bool(np.all(mean_err < 6.0))
-        ok_var = bool(np.all(np.abs(var_ratio - 1.0) < var_tol))
-        if ok_mean and ok_var:
-            hint = ""
-        elif np.all(var_ratio < 0.5):
-            hint = ("the spread is far too small: alpha1*rot1**2 + alpha2*trans**2 is a VARIANCE; "
-                    "pass its square root as the standard deviation")
-        elif np.all(var_ratio > 2.0):
-            hint = "the spread is too large: are you using the variance as a standard deviation the other way round?"
-        else:
-            hint = ("rot1 noise variance = a1*rot1**2 + a2*trans**2, trans: a3*trans**2 + a4*(rot1**2 + rot2**2), "
-                    "rot2: a1*rot2**2 + a2*trans**2 (PR table 5.6)")
-        r.add("samples have the model's mean", ok_mean, f"mean offsets in standard errors {_fixed(mean_err)}", hint)
-        r.add("samples have the model's covariance", ok_var, f"variance ratios (yours / reference) {_fixed(var_ratio)}",
-              hint)
+        for k, (what, uk, case_hint) in enumerate(ODOMETRY_CASES):
+            name = f"{what}: samples have the model's mean and covariance"
+            start_k = np.array([2.0, -1.0, 0.7])
+            got = _array(r, name, _call(r, name, fn, np.tile(start_k, (n, 1)), uk, alphas,
+                                        np.random.default_rng(1 + k)), (n, 3))
+            ref = motion.sample_odometry(np.tile(start_k, (400_000, 1)), uk, alphas, np.random.default_rng(100 + k))
+            m = float(np.angle(np.exp(1j * ref[:, 2]).mean()))
+
+            def feats(p, m=m):  # unwrap headings around the reference mean
+                return np.column_stack([p[:, 0], p[:, 1], m + angle_diff(p[:, 2], m)])
+
+            fg, fr = feats(got), feats(ref)
+            sd = np.maximum(fr.std(axis=0), 1e-12)
+            mean_err = np.abs(fg.mean(axis=0) - fr.mean(axis=0)) / (sd / math.sqrt(n))
+            var_ratio = fg.var(axis=0) / np.maximum(fr.var(axis=0), 1e-300)
+            ok_mean = bool(np.all(mean_err < 6.0))
+            ok_var = bool(np.all(np.abs(var_ratio - 1.0) < var_tol))
+            if ok_mean and ok_var:
+                hint = ""
+            elif np.all(var_ratio < 0.5):
+                hint = ("the spread is far too small: alpha1*rot1**2 + alpha2*trans**2 is a VARIANCE; "
+                        "pass its square root as the standard deviation")
+            elif np.all(var_ratio > 2.0) and k == 0:
+                hint = ("the spread is too large: are you using the variance as a standard deviation the other "
+                        "way round?")
+            else:
+                hint = case_hint
+            r.add(name, ok_mean and ok_var,
+                  f"mean (x, y, theta) {_fixed(fg.mean(axis=0))}, std {_fixed(fg.std(axis=0))}", hint,
+                  expected=f"mean (x, y, theta) {_fixed(fr.mean(axis=0))}, std {_fixed(fr.std(axis=0))} "
+                           f"(+- {_fixed(6 * sd / math.sqrt(n))} on the mean)")
         a = _array(r, "uses the rng it is given (reproducible)",
                    _call(r, "uses the rng it is given (reproducible)", fn, np.zeros((5, 3)), u, alphas,
                          np.random.default_rng(7)))
@@ -448,74 +497,122 @@ def odometry_pdf(fn: Callable) -> Report:
         else:
             hint = ("prob(a, var) = exp(-a**2 / (2 var)) / sqrt(2 pi var) with var = a1*rot1**2 + a2*trans**2 ... "
                     "evaluated at the MEASURED motion; multiply the three and divide by the translation")
-        r.add("matches the odometry density", bool(np.all(good)),
-              f"ratio yours / reference {_fixed(ratio)}", hint)
+        main_ok = bool(np.all(good))
+        r.add("matches the odometry density", main_ok, f"ratio yours / reference {_fixed(ratio)}", hint,
+              expected=f"ratio 1 everywhere (reference densities {_fixed(ref)})")
+
+        def single(prev_k: NDArray, uk: tuple, poses_k: NDArray) -> NDArray:
+            return np.array([float(np.reshape(np.asarray(_call(r, "runs on single poses", fn, q, uk, prev_k, alphas),
+                                                         float), -1)[0]) for q in poses_k])
+
+        elsewhere = ("your density already differs from the reference on the ordinary motion above: fix that "
+                     "first; this case only adds {}")
         # a motion whose headings cross the +-pi seam
         prev2 = np.array([0.0, 0.0, 3.0])
         seam = motion.sample_odometry(np.tile(prev2, (6, 1)), u, alphas, np.random.default_rng(12))
         ref2 = motion.odometry_pdf(seam, u, prev2, alphas)
-        vals2 = np.array([float(np.reshape(np.asarray(_call(r, "runs on single poses", fn, p, u, prev2, alphas),
-                                                      float), -1)[0]) for p in seam])
-        r.add("angle differences are wrapped", bool(np.allclose(vals2, ref2, rtol=1e-5, atol=1e-12)),
-              f"got {_fixed(vals2)}, expected {_fixed(ref2)}",
-              "wrap every angle difference (rot1_hat - rot1 etc.) to [-pi, pi) before the Gaussian")
+        vals2 = single(prev2, u, seam)
+        ok2 = bool(np.allclose(vals2, ref2, rtol=1e-5, atol=1e-12))
+        r.add("angle differences are wrapped (headings cross +-pi)", ok2, _fixed(vals2),
+              "wrap every angle difference (rot1_hat - rot1 etc.) to [-pi, pi) before the Gaussian" if main_ok
+              else elsewhere.format("headings that cross the +-pi seam"), expected=_fixed(ref2))
+        # driving backwards: rot1 and rot2 near +-pi
+        u3 = (np.array([0.0, 0.0, -3.0]), np.array([0.8, 0.25, -3.05]))
+        prev3 = np.array([1.0, 1.0, 2.0])
+        back = motion.sample_odometry(np.tile(prev3, (6, 1)), u3, alphas, np.random.default_rng(13))
+        ref3 = motion.odometry_pdf(back, u3, prev3, alphas)
+        vals3 = single(prev3, u3, back)
+        ok3 = bool(np.allclose(vals3, ref3, rtol=1e-4, atol=1e-12))
+        r.add("a move backwards (rot1 near pi)", ok3, _fixed(vals3),
+              ("wrap rot1 = atan2(dy, dx) - theta and rot2 to [-pi, pi) for the measured AND the hypothesised "
+               "motion before computing variances and differences") if main_ok
+              else elsewhere.format("a backwards move"), expected=_fixed(ref3))
 
     return _run("odometry_pdf", body)
 
 
 # ---------------------------------------------------------------------------- sensors
 def _beam_ref(z: NDArray, z_exp: NDArray, prm: dict) -> NDArray:
-    """The beam mixture of PR section 6.3 with truncated, normalised components (the check's oracle)."""
+    """The beam mixture of PR section 6.3 and table 6.1, as :class:`localize.sensors.BeamModel` (the oracle).
+
+    Truncated, normalised components. The convention at a max-range reading
+    (chapter 5): readings beyond ``max_range`` count as ``max_range``, and at
+    ``z = max_range`` the point mass ``z_max`` is *added* to the continuous
+    densities evaluated there (the hit Gaussian on ``[0, max_range]``, the
+    short exponential on ``[0, z*]``), exactly as PR's table 6.1 reads; the
+    uniform part lives on ``[0, max_range)`` and is 0 there.
+    """
     from scipy.special import erf
 
     zmax = prm["max_range"]
     s = prm["sigma_hit"]
     lam = prm["lambda_short"]
-    z = np.asarray(z, float)
-    ze = np.asarray(z_exp, float)
-    inside = (z >= 0) & (z < zmax)
+    z = np.minimum(np.asarray(z, float), zmax)
+    ze = np.minimum(np.asarray(z_exp, float), zmax)
     norm_hit = 0.5 * (erf((zmax - ze) / (s * math.sqrt(2))) - erf((0 - ze) / (s * math.sqrt(2))))
-    p_hit = np.where(inside, np.exp(-0.5 * ((z - ze) / s) ** 2) / (s * math.sqrt(2 * math.pi)) / norm_hit, 0.0)
-    short_ok = inside & (z <= ze)
+    p_hit = np.where(z >= 0, np.exp(-0.5 * ((z - ze) / s) ** 2) / (s * math.sqrt(2 * math.pi)) / norm_hit, 0.0)
+    short_ok = (z >= 0) & (z <= ze)
     p_short = np.where(short_ok, lam * np.exp(-lam * z) / (1 - np.exp(-lam * ze)), 0.0)
     p_max = (z >= zmax).astype(float)
-    p_rand = np.where(inside, 1.0 / zmax, 0.0)
+    p_rand = np.where((z >= 0) & (z < zmax), 1.0 / zmax, 0.0)
     return prm["z_hit"] * p_hit + prm["z_short"] * p_short + prm["z_max"] * p_max + prm["z_rand"] * p_rand
 
 
 def beam_model(fn: Callable, params: dict | None = None) -> Report:
     """Check a beam-model density ``fn(z, z_expected, params)`` (PR section 6.3, table 6.1).
 
-    Properties: agreement with the four-part mixture, and normalisation — the
-    continuous part integrates over ``[0, max_range)`` to ``1 - z_max`` and the
-    point mass at ``max_range`` carries ``z_max``.
+    Properties: agreement with the four-part mixture; normalisation (the
+    continuous part integrates over ``[0, max_range)`` to ``1 - z_max`` and
+    the point mass at ``max_range`` carries ``z_max``); a reading at max range
+    when the expected range is max range too (open space: the hit density
+    there *plus* the point mass, the convention of chapter 5 and of
+    :class:`localize.sensors.BeamModel`); a reading beyond max range counts as
+    max range.
     """
     prm = dict(BEAM_PARAMS if params is None else params)
+
+    def one(r: Report, name: str, z: float, z_exp: float) -> float:
+        v = _array(r, name, _call(r, name, fn, z, z_exp, dict(prm)))
+        return float(np.reshape(v, -1)[0]) if v.size else float("nan")
 
     def body(r: Report) -> None:
         zmax = prm["max_range"]
         z_exp = 4.0
         zs = np.array([0.5, 2.0, 3.9, 4.0, 4.3, 7.0, 9.5, zmax])
-        vals = np.array([float(np.reshape(_array(r, "returns a number per reading",
-                                                 _call(r, "runs on single readings", fn, z, z_exp, dict(prm))), -1)[0])
-                         for z in zs])
+        vals = np.array([one(r, "runs on single readings", z, z_exp) for z in zs])
         r.add("returns a number per reading", bool(np.all(np.isfinite(vals))), f"values {_fixed(vals)}",
               "return a finite probability density for every reading")
         ref = _beam_ref(zs, np.full_like(zs, z_exp), prm)
-        # normalisation by numerical integration over [0, zmax) (midpoint rule, 20000 cells)
-        grid = (np.arange(20_000) + 0.5) * (zmax / 20_000)
-        dens = np.array([float(np.reshape(np.asarray(fn(z, z_exp, dict(prm)), float), -1)[0]) for z in grid[::10]])
+        # normalisation by numerical integration over [0, zmax) (midpoint rule, 2000 cells)
+        grid = (np.arange(2_000) + 0.5) * (zmax / 2_000)
+        dens = np.array([float(np.reshape(np.asarray(fn(z, z_exp, dict(prm)), float), -1)[0]) for z in grid])
         integral = float(dens.sum() * zmax / 2_000)
         point = vals[-1]
         total = integral + point
         r.add("integrates to one (continuous part + max-range mass)", abs(total - 1.0) < 5e-3,
               f"integral over [0, max_range) = {integral:.4f}, mass at max_range = {point:.4f}, total {total:.4f}",
-              "each component must be a normalised density: divide the Gaussian by its mass inside [0, max_range) "
-              "and the exponential by 1 - exp(-lambda z*); the max-range reading is a point mass of weight z_max")
+              "each component must be a normalised density: divide the Gaussian by its mass inside [0, max_range] "
+              "and the exponential by 1 - exp(-lambda z*); the max-range reading is a point mass of weight z_max",
+              expected=f"integral {1 - prm['z_max']:.4f}, mass {prm['z_max']:.4f}, total 1")
         ok = np.allclose(vals, ref, rtol=1e-3, atol=1e-9)
-        r.add("matches the four-part mixture", ok, f"got {_fixed(vals)}, expected {_fixed(ref)}",
+        r.add("matches the four-part mixture", ok, _fixed(vals),
               "p = z_hit p_hit + z_short p_short + z_max p_max + z_rand p_rand; p_short is zero beyond the expected "
-              "range, p_rand is 1/max_range below max_range")
+              "range, p_rand is 1/max_range below max_range", expected=_fixed(ref))
+        name = "a reading at max range when max range is expected (open space)"
+        v_open = one(r, name, zmax, zmax)
+        ref_open = float(_beam_ref(np.array([zmax]), np.array([zmax]), prm)[0])
+        only_mass = abs(v_open - prm["z_max"]) < 1e-9
+        r.add(name, bool(np.isclose(v_open, ref_open, rtol=1e-3)), f"{v_open:.4g}",
+              ("you returned the point mass z_max alone; at z = max_range add it to the continuous densities there "
+               "(z_hit p_hit(max_range) + z_short p_short + z_max, as PR table 6.1 reads and chapter 5 explains), "
+               "so that a particle expecting open space is rewarded for a max-range reading") if only_mass
+              else ("at z = max_range: z_hit p_hit(max_range | z*) + z_short p_short + z_max (the uniform part is 0 "
+                    "there); clip z* to max_range"), expected=f"{ref_open:.4g}")
+        name = "a reading beyond max range counts as max range"
+        v_far = one(r, name, zmax + 2.5, z_exp)
+        r.add(name, bool(np.isclose(v_far, ref[-1], rtol=1e-3)), f"p({zmax + 2.5:g} | {z_exp:g}) = {v_far:.4g}",
+              "a reading >= max_range means 'no return': treat it as z = max_range (np.minimum(z, max_range))",
+              expected=f"p({zmax:g} | {z_exp:g}) = {ref[-1]:.4g}")
 
     return _run("beam_model", body)
 
@@ -547,7 +644,7 @@ def scan_log_likelihood(fn: Callable, params: dict | None = None) -> Report:
                     "instead of multiplying probabilities")
         else:
             hint = "log p(scan | pose) = sum over beams of log p(z_k | z_k*)"
-        r.add(name, bool(np.isclose(val, ref, rtol=1e-6)), f"got {val:.6g}, expected {ref:.6g}", hint)
+        r.add(name, bool(np.isclose(val, ref, rtol=1e-6)), f"{val:.6g}", hint, expected=f"{ref:.6g}")
         r.add("stays finite for 180 beams (no underflow)", bool(np.isfinite(val)), f"got {val}",
               "work in log space: sum log-densities instead of taking the log of a product")
         shifted = float(np.reshape(np.asarray(fn(ranges, expected + 1.0, dict(prm)), float), -1)[0])
@@ -586,6 +683,12 @@ class _EdgeRNG(np.random.Generator):
         return np.broadcast_to(v, size).copy()
 
 
+_GUARD_HINT = ("Guard BOTH ends of the search: set cumsum[-1] = 1.0, and since a pointer can itself round to "
+               "exactly 1.0 (r + (N-1)/N with r just below 1/N), clip the index to N - 1 "
+               "(np.minimum(idx, N - 1)). With np.searchsorted(cumsum, u, side='right') setting cumsum[-1] = 1.0 "
+               "is NOT enough: side='right' returns N for u == 1.0, so clip as well.")
+
+
 def _indices(r: Report, name: str, fn: Callable, w: NDArray, rng: np.random.Generator) -> NDArray:
     idx = _array(r, name, _call(r, name, fn, w.copy(), rng), integer=True)
     if idx.shape != (len(w),):
@@ -597,8 +700,7 @@ def _indices(r: Report, name: str, fn: Callable, w: NDArray, rng: np.random.Gene
         raise _Stop
     if idx.min() < 0 or idx.max() >= len(w):
         r.add(name, False, f"an index is out of range: min {idx.min()}, max {idx.max()} for N = {len(w)}",
-              "indices run from 0 to N - 1; when the cumulative sum of the weights ends just below one, "
-              "guard the last index (e.g. set cumsum[-1] = 1.0 or clip)")
+              f"indices run from 0 to N - 1. {_GUARD_HINT}", expected=f"indices in 0 .. {len(w) - 1}")
         raise _Stop
     return idx
 
@@ -633,10 +735,10 @@ def resampler(fn: Callable, scheme: str | None = None, repeats: int = 4000) -> R
         z = np.abs(mean - n * w) / se
         unbiased = bool(np.all(z < 5.0))
         r.add("unbiased: mean offspring count is N * w_i", unbiased,
-              f"mean counts {_fixed(mean)}, expected {_fixed(n * w)}",
+              f"mean counts {_fixed(mean)}",
               "every particle must be copied N * w_i times on average: check the offsets of your pointers "
               "(systematic: u_m = r + m / N with r ~ U[0, 1/N)); residual: draw the remainder from "
-              "N * w_i - floor(N * w_i), not from w_i")
+              "N * w_i - floor(N * w_i), not from w_i", expected=f"{_fixed(n * w)} (+- {_fixed(5 * se)})")
         a = _indices(r, "reproducible with the same rng", fn, w, np.random.default_rng(42))
         b = _indices(r, "reproducible with the same rng", fn, w, np.random.default_rng(42))
         r.add("reproducible with the same rng", np.array_equal(a, b), "",
@@ -645,19 +747,19 @@ def resampler(fn: Callable, scheme: str | None = None, repeats: int = 4000) -> R
         # here): ten weights of 0.1 sum to 0.9999999999999999 in floating point, and a random
         # offset at the top of its range puts the last pointer at 1.0.
         w2 = np.full(10, 0.1)
-        tail_ok = True
+        tail_ok, tail_seen = True, ""
         for _ in range(20):
             try:
                 idx = np.asarray(fn(w2.copy(), _EdgeRNG(3)))
-            except Exception:  # noqa: BLE001
-                tail_ok = False
+            except Exception as err:  # noqa: BLE001
+                tail_ok, tail_seen = False, f"your function raised {type(err).__name__}: {err}"
                 break
             if idx.shape != (10,) or idx.min() < 0 or idx.max() >= 10:
-                tail_ok = False
+                tail_ok, tail_seen = False, f"indices {idx.tolist()}"
                 break
-        r.add("never indexes past the end when the weights sum to slightly below one", tail_ok, "",
-              "np.cumsum of ten weights 0.1 ends at 0.9999999999999999; set its last entry to 1.0 "
-              "(or use np.searchsorted and clip) so a pointer near 1 still finds a particle")
+        r.add("never indexes past the end when the weights sum to slightly below one", tail_ok, tail_seen,
+              "np.cumsum of ten weights 0.1 ends at 0.9999999999999999. " + _GUARD_HINT,
+              expected="ten indices in 0 .. 9")
         if scheme is None:
             return
         var = counts.var(axis=0)
@@ -668,18 +770,21 @@ def resampler(fn: Callable, scheme: str | None = None, repeats: int = 4000) -> R
             r.add("low variance: every particle gets floor(N w_i) or ceil(N w_i) copies", ok,
                   f"count ranges seen {_fixed(counts.min(0))} .. {_fixed(counts.max(0))}",
                   "use ONE random number r in [0, 1/N) and N equally spaced pointers r + m/N "
-                  "(m = 0 .. N-1); a pointer per draw, or r in [0, 1), breaks this")
+                  "(m = 0 .. N-1); a pointer per draw, or r in [0, 1), breaks this",
+                  expected=f"counts between {_fixed(lo)} .. {_fixed(hi)}")
         if scheme in ("systematic", "stratified", "residual"):
             ok = bool(var.sum() < 0.8 * var_multi.sum())
             r.add(f"{scheme} has lower offspring variance than multinomial", ok,
-                  f"total variance {var.sum():.3f}, multinomial {var_multi.sum():.3f}",
+                  f"total variance {var.sum():.3f}",
                   f"{scheme} resampling must spread its pointers over [0, 1); independent uniform draws "
-                  "give multinomial resampling")
+                  "give multinomial resampling",
+                  expected=f"below {0.8 * var_multi.sum():.3f} (0.8 x multinomial's {var_multi.sum():.3f})")
         if scheme == "multinomial":
             ok = bool(abs(var.sum() / var_multi.sum() - 1.0) < 0.15)
             r.add("multinomial has offspring variance N w (1 - w)", ok,
-                  f"total variance {var.sum():.3f}, expected {var_multi.sum():.3f}",
-                  "draw N independent uniforms and find each one's particle in the cumulative sum")
+                  f"total variance {var.sum():.3f}",
+                  "draw N independent uniforms and find each one's particle in the cumulative sum",
+                  expected=f"{var_multi.sum():.3f} (within 15%)")
         _ = ref  # the reference module documents the schemes
 
     return _run(f"resampler ({scheme or 'any scheme'})", body)
@@ -705,12 +810,13 @@ def effective_sample_size(fn: Callable) -> Report:
             val = float(np.reshape(v, -1)[0])
             hint = ("N_eff = 1 / sum(w_i**2) for normalised weights" if not np.isclose(val, 1 / expected)
                     else "you returned sum(w**2); N_eff is its reciprocal")
-            r.add(name, bool(np.isclose(val, expected, rtol=1e-9)), f"got {val:.6g}, expected {expected:.6g}", hint)
+            r.add(name, bool(np.isclose(val, expected, rtol=1e-9)), f"{val:.6g}", hint, expected=f"{expected:.6g}")
         raw = w * 8.0
         name = "normalises unnormalised weights first"
         val = float(np.reshape(_array(r, name, _call(r, name, fn, raw.copy())), -1)[0])
-        r.add(name, bool(np.isclose(val, 1.0 / float((w ** 2).sum()), rtol=1e-9)), f"got {val:.6g}",
-              "divide the weights by their sum before squaring: N_eff = (sum w)**2 / sum(w**2)")
+        r.add(name, bool(np.isclose(val, 1.0 / float((w ** 2).sum()), rtol=1e-9)), f"{val:.6g}",
+              "divide the weights by their sum before squaring: N_eff = (sum w)**2 / sum(w**2)",
+              expected=f"{1.0 / float((w ** 2).sum()):.6g}")
 
     return _run("effective_sample_size", body)
 
@@ -751,7 +857,7 @@ def mcl_step(fn: Callable) -> Report:
         # with a flat likelihood every surviving particle is one of the moved ones
         on_moved = np.mean([np.any(np.all(np.isclose(o, moved), axis=1)) for o in out[:200]])
         r.add("particles are moved by the motion model", bool(on_moved > 0.99), f"{on_moved:.0%} of particles moved",
-              "apply motion(particles, u, rng) to every particle before weighting")
+              "apply motion(particles, u, rng) to every particle before weighting", expected="100% moved")
 
         def sensor_right(p, ranges, angles):  # strongly prefers x > 5
             return np.where(p[:, 0] > 5.0, 0.0, np.log(0.25)) - 1500.0
@@ -777,7 +883,37 @@ def mcl_step(fn: Callable) -> Report:
         else:
             hint = ("weights are exp(log-likelihood - max), normalised; resample N indices with those "
                     "probabilities")
-        r.add(name, ok, f"fraction with x > 5: {frac:.3f}, expected {p_right:.3f} +- {se:.3f}", hint)
+        r.add(name, ok, f"fraction with x > 5: {frac:.3f}", hint, expected=f"{p_right:.3f} +- {6 * se:.3f}")
+
+        # Weight AFTER moving: particles at x in [0, 5] facing +x drive 5 m; the sensor sees x = 7.
+        # Weighted after the move the survivors sit around x = 7; weighted before it, the weights
+        # favour the particles nearest x = 7 BEFORE the move (x near 5), which then end near 10.
+        name = "weights the particles after moving them"
+        east = np.column_stack([rng0.uniform(0, 5, n), rng0.uniform(0, 10, n), np.zeros(n)])
+        u5 = (np.array([0.0, 0.0, 0.0]), np.array([5.0, 0.0, 0.0]))
+
+        def sensor_at_7(p, ranges, angles):
+            return -0.5 * ((p[:, 0] - 7.0) / 0.5) ** 2 - 800.0
+
+        out3 = _array(r, name, _call(r, name, fn, east.copy(), u5, ranges, angles, motion, sensor_at_7,
+                                     np.random.default_rng(2), _hint=lse_hint), (n, 3))
+        xs = east[:, 0] + 5.0
+        w7 = np.exp(-0.5 * ((xs - 7.0) / 0.5) ** 2)
+        want = float((w7 * xs).sum() / w7.sum())
+        w_before = np.exp(-0.5 * ((east[:, 0] - 7.0) / 0.5) ** 2)
+        before = float((w_before * xs).sum() / w_before.sum())
+        mean_x = float(np.mean(out3[:, 0]))
+        # the weighted posterior has sd 0.5 m; 2000 resampled draws give a mean within 0.02 m (5 standard
+        # errors of an i.i.d. sample, and resampling repeats particles, so allow 0.1 m)
+        ok = bool(np.isfinite(mean_x) and abs(mean_x - want) < 0.1)
+        if ok:
+            hint = ""
+        elif abs(mean_x - before) < 0.3:
+            hint = ("you weighted the particles BEFORE moving them (or resampled and then moved): the scan is taken "
+                    "at the new pose, so call sensor(moved, ranges, angles) on the moved particles")
+        else:
+            hint = "order of one step: moved = motion(particles, u, rng); weights from sensor(moved, ...); resample"
+        r.add(name, ok, f"mean x of the new particles {mean_x:.3f} m", hint, expected=f"{want:.3f} +- 0.1 m")
         a = _array(r, "reproducible with the same rng", _call(r, "reproducible with the same rng", fn, parts.copy(), u,
                                                               ranges, angles, motion, sensor_right,
                                                               np.random.default_rng(9)))
@@ -788,3 +924,298 @@ def mcl_step(fn: Callable) -> Report:
               "pass rng to the motion model and draw the resampling numbers from it")
 
     return _run("mcl_step", body)
+
+
+# ---------------------------------------------------------------------------- maps and grids
+def world_to_cell(fn: Callable) -> Report:
+    """Check ``fn(points, origin, resolution) -> (N, 2)`` integer ``(row, column)`` cells (the preface).
+
+    The convention of :class:`localize.OccupancyGrid`: cell ``(i, j)`` covers
+    ``x0 + j r <= x < x0 + (j + 1) r`` and ``y0 + i r <= y < y0 + (i + 1) r``,
+    so row ``i`` grows with ``y``.
+    """
+    from .grid import OccupancyGrid
+
+    def body(r: Report) -> None:
+        origin, res = np.array([-1.5, 2.0]), 0.25
+        grid = OccupancyGrid(np.zeros((8, 12)), res, origin=tuple(origin))
+        pts = np.array([[-1.2, 2.1], [0.0, 3.3], [1.49, 2.74], [-0.76, 3.99], [1.0, 2.0]])
+        want = grid.world_to_cell(pts)
+        name = "points go to the (row, column) of the cell that contains them"
+        raw = _call(r, name, fn, pts.copy(), origin.copy(), res)
+        out = _array(r, name, raw, want.shape)
+        ok = bool(np.array_equal(out, want))
+        rel = (pts - origin) / res
+        if ok:
+            hint = ""
+        elif np.array_equal(out, want[:, ::-1]):
+            hint = "you returned (column, row): the ROW index i comes from y, the column j from x"
+        elif np.array_equal(out, np.round(rel[:, ::-1])):
+            hint = "use np.floor, not np.round: a point 0.9 cells into cell j is still in cell j"
+        elif np.array_equal(out, np.floor(pts / res)[:, ::-1]):
+            hint = "subtract the origin first: j = floor((x - x0) / r), i = floor((y - y0) / r)"
+        else:
+            hint = "i = floor((y - y0) / r), j = floor((x - x0) / r), returned as integer pairs (i, j)"
+        r.add(name, ok, out.tolist(), hint, expected=want.tolist())
+        kind = np.asarray(raw).dtype
+        r.add("returns integers (usable as indices)", kind.kind in "iu", f"dtype {kind}",
+              "numpy indexes with integers only: convert with .astype(int) after np.floor",
+              expected="an integer dtype")
+
+    return _run("world_to_cell", body)
+
+
+def grid_update(fn: Callable) -> Report:
+    """Check the correction step of grid localization (chapter 3).
+
+    ``fn(belief, expected, beam_bins, ranges, beam_pdf) -> posterior``:
+    ``belief`` and ``expected`` are ``(K, H, W)`` (heading bin, row, column;
+    ``expected[k, i, j]`` is the expected range from cell ``(i, j)`` along the
+    *absolute* heading bin ``k``), ``beam_bins[b]`` is beam ``b``'s angle in
+    heading bins relative to the robot, ``ranges[b]`` its reading and
+    ``beam_pdf(z, z_expected)`` a vectorised beam density. Beam ``b`` of a
+    robot in heading bin ``k`` looks along bin ``(k + beam_bins[b]) % K``.
+    """
+
+    def pdf(z, z_exp):
+        z_exp = np.asarray(z_exp, float)
+        return 0.9 * np.exp(-0.5 * ((z - z_exp) / 0.3) ** 2) / (0.3 * math.sqrt(2 * math.pi)) + 0.1 / 10.0
+
+    def reference(belief, expected, bins, ranges, roll=+1, offsets=True, logs=True):
+        k_count = belief.shape[0]
+        ll = np.zeros(belief.shape)
+        for b, z in zip(bins, ranges):
+            idx = (np.arange(k_count) + roll * (b if offsets else 0)) % k_count
+            ll += np.log(pdf(z, expected[idx]))
+        if not logs:
+            post = belief * np.exp(ll)
+            return post / post.sum()
+        post = belief * np.exp(ll - ll.max())
+        return post / post.sum()
+
+    def body(r: Report) -> None:
+        rng = np.random.default_rng(8)
+        k_count, h, w = 8, 5, 6
+        expected = rng.uniform(0.5, 9.0, (k_count, h, w))
+        belief = rng.random((k_count, h, w))
+        belief /= belief.sum()
+        bins = np.array([0, 2, 4, 6, 1])
+        true = (3, 2, 4)                                    # the robot's bin: readings fit it
+        ranges = np.array([expected[(true[0] + b) % k_count, true[1], true[2]] for b in bins]) + 0.05
+        want = reference(belief, expected, bins, ranges)
+        name = "posterior = eta * belief * product of beam likelihoods"
+        out = _array(r, name, _call(r, name, fn, belief.copy(), expected.copy(), bins.copy(), ranges.copy(), pdf),
+                     belief.shape)
+        ok = bool(np.allclose(out, want, rtol=1e-6, atol=1e-12))
+        if ok:
+            hint = ""
+        elif np.allclose(out, reference(belief, expected, bins, ranges, roll=-1), rtol=1e-6, atol=1e-12):
+            hint = ("the beam offset goes the wrong way: beam b of heading bin k looks along (k + beam_bins[b]) % K, "
+                    "not (k - beam_bins[b])")
+        elif np.allclose(out, reference(belief, expected, bins, ranges, offsets=False), rtol=1e-6, atol=1e-12):
+            hint = ("every beam used the robot's own heading bin: add the beam's offset, expected[(k + beam_bins[b]) "
+                    "% K]")
+        elif np.allclose(out, reference(np.ones_like(belief), expected, bins, ranges), rtol=1e-6, atol=1e-12):
+            hint = "you ignored the prior belief: multiply it by the likelihood"
+        elif np.isclose(float(np.sum(out)), 1.0) is False:
+            hint = "normalise the posterior over all K x H x W bins"
+        else:
+            hint = ("log-likelihood of bin (k, i, j) = sum over beams b of log beam_pdf(ranges[b], "
+                    "expected[(k + beam_bins[b]) % K, i, j]); posterior = belief * exp(ll - max ll), normalised")
+        r.add(name, ok, f"belief of the true bin {float(out[true]):.4f}, sum {float(np.sum(out)):.4f}", hint,
+              expected=f"belief of the true bin {float(want[true]):.4f}, sum 1")
+        r.add("the true pose's bin is the most probable", bool(np.argmax(out) == np.ravel_multi_index(true, out.shape)),
+              f"argmax at {np.unravel_index(int(np.argmax(out)), out.shape)}",
+              "readings that fit a bin must raise it", expected=f"argmax at {true}")
+        # 360 beams that fit nowhere well: the product of densities underflows to 0
+        bins2 = np.arange(360) % k_count
+        ranges2 = np.full(360, 9.9)
+        want2 = reference(belief, expected, bins2, ranges2)
+        name = "360 beams do not underflow (work in log space)"
+        lse = ("the product of 360 beam densities underflows to 0 everywhere and 0/0 = NaN: add log-likelihoods "
+               "and subtract their maximum before exponentiating")
+        out2 = _array(r, name, _call(r, name, fn, belief.copy(), expected.copy(), bins2, ranges2, pdf, _hint=lse),
+                      belief.shape)
+        ok2 = bool(np.all(np.isfinite(out2)) and np.allclose(out2, want2, rtol=1e-5, atol=1e-12))
+        r.add(name, ok2, f"largest bin {float(np.nanmax(out2)) if np.any(np.isfinite(out2)) else float('nan'):.4f}",
+              lse if not np.all(np.isfinite(out2)) or np.allclose(out2, 0) else
+              "same rule as above, with many beams", expected=f"largest bin {float(want2.max()):.4f}")
+
+    return _run("grid_update", body)
+
+
+def map_image(fn: Callable) -> Report:
+    """Check ``fn(image, negate) -> occupancy`` reading a ROS ``map_server`` image (chapter 9).
+
+    ``image`` is an ``(H, W)`` uint8 array as stored in the PGM file (first row
+    = the TOP of the map); the result is in :class:`localize.OccupancyGrid`'s
+    convention (row 0 = the bottom, ``y`` grows with the row): 1.0 for
+    occupied, 0.0 for free, NaN for unknown, with map_server's trinary rule
+    and default thresholds: ``p = (255 - v) / 255`` (or ``v / 255`` when
+    ``negate``), occupied if ``p > 0.65``, free if ``p < 0.196``.
+    """
+    from .io.ros import image_to_occupancy
+
+    def body(r: Report) -> None:
+        img = np.full((5, 7), 254, dtype=np.uint8)
+        img[0, :] = 0            # a wall along the top of the picture = the far (high y) side of the map
+        img[:, 0] = 0
+        img[3, 4] = 205          # unknown (map_server's grey)
+        img[1, 5] = 150          # a grey wall: p = 0.41, unknown by the default thresholds
+        for negate in (False, True):
+            src = 255 - img if negate else img
+            want = np.flipud(image_to_occupancy(src, negate=negate))
+            inverted = np.flipud(image_to_occupancy(255 - src, negate=negate))   # = negate ignored, if negate
+            name = f"negate={negate}: occupancy in the grid's convention (row 0 at the bottom)"
+            out = _array(r, name, _call(r, name, fn, src.copy(), negate), want.shape)
+            ok = bool(np.allclose(out, want, equal_nan=True))
+            if ok:
+                hint = ""
+            elif np.allclose(out, np.flipud(want), equal_nan=True):
+                hint = ("the picture's first row is the TOP of the map, the grid's row 0 the bottom (y grows with the "
+                        "row): flip the image with np.flipud")
+            elif any(np.allclose(out, c, equal_nan=True) for c in (np.flipud(inverted), inverted)):
+                hint = ("white means FREE: occupancy p = (255 - value) / 255" if not negate else
+                        "you ignored negate: with negate: 1 the picture is inverted, p = value / 255")
+            elif not np.any(np.isnan(out)):
+                hint = ("cells between the thresholds (and map_server's grey 205) are UNKNOWN: NaN, "
+                        "not 0.5 or free")
+            else:
+                hint = "p = (255 - v) / 255 (v / 255 with negate); p > 0.65 -> 1, p < 0.196 -> 0, else NaN; flipud"
+            r.add(name, ok, _fixed(out), hint, expected=_fixed(want))
+
+    return _run("map_image", body)
+
+
+# ---------------------------------------------------------------------------- augmented MCL
+def injection(fn: Callable) -> Report:
+    """Check augmented MCL's averages ``fn(likelihoods, w_slow, w_fast, alpha_slow, alpha_fast)`` (chapter 8).
+
+    ``likelihoods`` are the measurement likelihoods ``p(z | x_i)`` of the
+    (equally weighted) particles. Return ``(w_slow, w_fast, p_inject)``:
+    ``w_avg`` = their mean, ``w_slow += alpha_slow (w_avg - w_slow)``,
+    ``w_fast += alpha_fast (w_avg - w_fast)``, ``p_inject = max(0, 1 -
+    w_fast / w_slow)`` (PR table 8.3).
+    """
+
+    def ref(lik, ws, wf, a_s, a_f):
+        w_avg = float(np.mean(lik))
+        ws = ws + a_s * (w_avg - ws)
+        wf = wf + a_f * (w_avg - wf)
+        return ws, wf, max(0.0, 1.0 - wf / ws)
+
+    cases = [
+        ("a step as good as usual injects nothing", np.array([0.2, 0.4, 0.6, 0.8]), 0.5, 0.5),
+        ("a sudden bad fit injects (w_fast drops below w_slow)", np.array([0.02, 0.05, 0.08, 0.05]), 0.5, 0.5),
+        ("a fit better than usual injects nothing (never a negative probability)", np.array([0.9, 0.8, 1.0, 0.9]),
+         0.5, 0.5),
+        ("every likelihood zero: injection still rises, no NaN", np.zeros(4), 0.3, 0.2),
+    ]
+
+    def body(r: Report) -> None:
+        a_s, a_f = 0.05, 0.5
+        for name, lik, ws, wf in cases:
+            got = _call(r, name, fn, lik.copy(), ws, wf, a_s, a_f)
+            try:
+                g = tuple(float(v) for v in got)
+                if len(g) != 3:
+                    raise ValueError
+            except (TypeError, ValueError):
+                r.add(name, False, f"returned {got!r}", "return the tuple (w_slow, w_fast, p_inject)")
+                raise _Stop from None
+            want = ref(lik, ws, wf, a_s, a_f)
+            ok = bool(np.allclose(g, want, rtol=1e-9, atol=1e-12))
+            norm = ref(np.full(lik.shape, 1.0 / lik.size), ws, wf, a_s, a_f)
+            w_avg = float(np.mean(lik))
+            ws1, wf1 = ws + a_s * (w_avg - ws), wf + a_f * (w_avg - wf)
+            if ok:
+                hint = ""
+            elif np.allclose(g, norm, rtol=1e-9):
+                hint = ("you averaged the NORMALISED weights, which always average 1/N: w_avg is the mean of the "
+                        "raw likelihoods p(z | x_i)")
+            elif any(not math.isfinite(v) for v in g):
+                hint = "do not normalise the likelihoods (0/0 when all are zero): w_avg is their plain mean"
+            elif np.allclose(g[:2], ref(lik, ws, wf, a_f, a_s)[:2], rtol=1e-9):
+                hint = "alpha_slow belongs to w_slow and alpha_fast to w_fast (alpha_slow << alpha_fast)"
+            elif np.allclose(g[:2], (ws1, wf1), rtol=1e-9) and wf1 > 0 and (
+                    np.isclose(g[2], 1.0 - ws1 / wf1) or np.isclose(g[2], max(0.0, 1.0 - ws1 / wf1))):
+                hint = "the ratio is upside down: p_inject = 1 - w_fast / w_slow"
+            elif np.allclose(g[:2], (ws1, wf1), rtol=1e-9) and g[2] < 0:
+                hint = "a probability cannot be negative: p_inject = max(0, 1 - w_fast / w_slow)"
+            else:
+                hint = ("w_avg = mean(likelihoods); w_slow += alpha_slow (w_avg - w_slow); w_fast += alpha_fast "
+                        "(w_avg - w_fast); p_inject = max(0, 1 - w_fast / w_slow)")
+            r.add(name, ok, "(w_slow, w_fast, p_inject) = " + _fixed(g), hint,
+                  expected=_fixed(want))
+
+    return _run("injection", body)
+
+
+# ---------------------------------------------------------------------------- EKF
+def ekf_update(fn: Callable) -> Report:
+    """Check one EKF correction with a range-bearing sighting ``fn(mean, cov, z, landmark, Q) -> (mean, cov)``.
+
+    PR table 7.2 lines 12-21 for one landmark: ``z_hat = h(mean)``,
+    ``H`` the Jacobian (:func:`localize.ekf.landmark_jacobian`), ``S = H cov
+    H^T + Q``, ``K = cov H^T S^-1``, ``mean + K (z - z_hat)`` with the
+    bearing innovation wrapped, ``(I - K H) cov``.
+    """
+    from .ekf import landmark_jacobian, landmark_measurement
+    from .geometry import wrap_angle as _wrap
+
+    def ref(mean, cov, z, m, q, wrap=True, inverse=True):
+        zh = landmark_measurement(mean, m)
+        h = landmark_jacobian(mean, m)
+        s = h @ cov @ h.T + q
+        k = cov @ h.T @ (np.linalg.inv(s) if inverse else s)
+        y = z - zh
+        if wrap:
+            y[1] = _wrap(y[1])
+        mu = mean + k @ y
+        mu[2] = _wrap(mu[2])
+        return mu, (np.eye(3) - k @ h) @ cov
+
+    q = np.diag([0.04, 0.0025])
+    cov = np.diag([0.25, 0.25, 0.01])
+    cases = [
+        ("a landmark ahead and to the left", np.array([1.0, 1.0, np.pi / 2]), np.array([4.0, 5.0]),
+         np.array([5.3, -0.60])),
+        ("a landmark behind the robot (bearing near +-pi)", np.array([0.0, 0.0, 3.12]), np.array([5.0, -0.1]),
+         np.array([4.8, 3.05])),
+    ]
+
+    def body(r: Report) -> None:
+        for name, mean, m, z in cases:
+            got = _call(r, name, fn, mean.copy(), cov.copy(), z.copy(), m.copy(), q.copy())
+            try:
+                mu, sg = (np.asarray(v, dtype=float) for v in got)
+            except (TypeError, ValueError):
+                r.add(name, False, f"returned {type(got).__name__}", "return the pair (mean, cov)")
+                raise _Stop from None
+            if mu.shape != (3,) or sg.shape != (3, 3):
+                r.add(name, False, f"shapes {mu.shape} and {sg.shape}", "mean has shape (3,), cov (3, 3)")
+                raise _Stop
+            want_mu, want_cov = ref(mean, cov, z, m, q)
+            ok_mu = bool(np.allclose(mu[:2], want_mu[:2], atol=1e-8) and abs(_wrap(mu[2] - want_mu[2])) < 1e-8)
+            ok_cov = bool(np.allclose(sg, want_cov, atol=1e-10))
+            if ok_mu and ok_cov:
+                hint = ""
+            elif ok_mu and np.allclose(sg, cov):
+                hint = "the covariance must shrink after a measurement: cov' = (I - K H) cov"
+            elif ok_mu:
+                hint = "cov' = (I - K H) cov (or the Joseph form); check the sign and the order of the product"
+            elif np.allclose(mu, ref(mean, cov, z, m, q, wrap=False)[0], atol=1e-8):
+                y = float(z[1] - landmark_measurement(mean, m)[1])
+                hint = (f"the bearing innovation z - z_hat is not wrapped: here it is {y:.2f} rad, really "
+                        f"{float(_wrap(y)):.2f}; wrap it to [-pi, pi) before K (z - z_hat)")
+            elif np.allclose(mu, ref(mean, cov, z, m, q, inverse=False)[0], atol=1e-8):
+                hint = "K = cov H^T S^-1: you multiplied by S instead of its inverse (np.linalg.solve or inv)"
+            else:
+                hint = ("z_hat = (range, bearing) from the PREDICTED mean; H = [[-dx/r, -dy/r, 0], [dy/q, -dx/q, -1]]; "
+                        "mean' = mean + K (z - z_hat)")
+            r.add(name, ok_mu and ok_cov, f"mean {_fixed(mu)}, cov diagonal {_fixed(np.diag(sg))}", hint,
+                  expected=f"mean {_fixed(want_mu)}, cov diagonal {_fixed(np.diag(want_cov))}")
+            r.add(f"{name}: the heading of the result is wrapped", bool(-np.pi <= mu[2] < np.pi),
+                  f"theta = {mu[2]:.4f}", "wrap the new heading to [-pi, pi)", expected="theta in [-pi, pi)")
+
+    return _run("ekf_update", body)

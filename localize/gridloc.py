@@ -281,6 +281,9 @@ class GridLocalizer:
         a = np.atleast_1d(np.asarray(angles, dtype=float))
         if a.ndim != 1 or a.size == 0 or not np.all(np.isfinite(a)):
             raise ValueError(f"angles must be a non-empty 1-D array of finite beam angles; got shape {a.shape}")
+        if float(np.max(np.abs(a))) > 2 * np.pi + 1e-9:
+            raise ValueError(f"beam angles must be radians in [-2 pi, 2 pi]; got values up to "
+                             f"{float(np.max(np.abs(a))):g} -- degrees? convert with np.radians(angles)")
         self.angles = a
         self.beam_bins = np.round(np.asarray(wrap_angle(a)) / self.bin_width).astype(int) % self.K
         self.alphas = np.asarray(alphas, dtype=float)

@@ -89,8 +89,14 @@ def likelihood(world: ArrayLike, measurement, p_hit: float, p_miss: float) -> ND
     return np.where(match, ph, pm)
 
 
-def sense(belief: ArrayLike, world: ArrayLike, measurement, p_hit: float, p_miss: float) -> NDArray[np.float64]:
+_NO_Z = object()
+
+
+def sense(belief: ArrayLike, world: ArrayLike, measurement=_NO_Z, p_hit: float | None = None,
+          p_miss: float | None = None, *, z=_NO_Z) -> NDArray[np.float64]:
     """Measurement update: multiply by ``p_hit`` where the tile matches the reading, ``p_miss`` elsewhere, normalise.
+
+    The reading may also be passed as ``z=`` (the notation table's name for it).
 
     Parameters
     ----------
@@ -116,7 +122,16 @@ def sense(belief: ArrayLike, world: ArrayLike, measurement, p_hit: float, p_miss
     >>> world = np.array([["green", "blue", "green"]])
     >>> sense(np.full((1, 3), 1 / 3), world, "blue", 0.85, 0.15).round(3)
     array([[0.13 , 0.739, 0.13 ]])
+    >>> sense(np.full((1, 3), 1 / 3), world, z="blue", p_hit=0.85, p_miss=0.15).round(3)
+    array([[0.13 , 0.739, 0.13 ]])
     """
+    if z is not _NO_Z:
+        if measurement is not _NO_Z:
+            raise TypeError("sense() got the reading twice: pass measurement=... or z=..., not both")
+        measurement = z
+    if measurement is _NO_Z or p_hit is None or p_miss is None:
+        raise TypeError("sense(belief, world, measurement, p_hit, p_miss) needs the reading (measurement= or z=), "
+                        "p_hit and p_miss")
     b = as_belief(belief)
     w = _world(world, b.shape)
     post = b * likelihood(w, measurement, p_hit, p_miss)   # checked weights: no need to re-check

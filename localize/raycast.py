@@ -101,6 +101,9 @@ def _check_angles(angles: ArrayLike) -> NDArray[np.float64]:
         raise ValueError(f"angles must be a 1-D array of beam angles in radians; got shape {a.shape}")
     if not np.all(np.isfinite(a)):
         raise ValueError("angles must be finite (radians relative to the sensor heading); found NaN or inf")
+    if a.size and float(np.max(np.abs(a))) > 2 * np.pi + 1e-9:
+        raise ValueError(f"beam angles must be radians in [-2 pi, 2 pi]; got values up to {float(np.max(np.abs(a))):g}"
+                         " -- degrees? convert with np.radians(angles)")
     return a
 
 

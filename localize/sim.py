@@ -177,6 +177,27 @@ class RangeRun:
         return self.odometry[k - 1], self.odometry[k]
 
     @property
+    def controls(self) -> NDArray[np.float64]:
+        """All controls as one array ``(T, 2, 3)``: ``controls[k] = (odometry[k-1], odometry[k])``.
+
+        The same indexing as :attr:`CorridorRun.controls` and
+        :attr:`LandmarkRun.controls` (the motion *into* step ``k``; row 0 is
+        no motion, ``(odometry[0], odometry[0])``); ``controls[k]`` equals
+        :meth:`control` ``(k)`` for ``k >= 1``.
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> run = range_run(office(), np.random.default_rng(0), n_steps=3, angles=[])
+        >>> run.controls.shape, bool(np.array_equal(run.controls[2], np.stack(run.control(2))))
+        ((3, 2, 3), True)
+        """
+        prev = np.concatenate([self.odometry[:1], self.odometry[:-1]])
+        out = np.stack([prev, self.odometry], axis=1)
+        out.flags.writeable = False
+        return out
+
+    @property
     def sensor_poses(self) -> NDArray[np.float64]:
         """True poses of the range finder, shape (T, 3)."""
         return compose(self.poses, self.sensor_offset)
@@ -933,6 +954,20 @@ class CorridorRun:
     def length(self) -> float:
         """Circumference of the ring in metres."""
         return float(self.doors.size)
+
+    def control(self, k: int) -> float:
+        """The commanded motion into step ``k`` (``controls[k]``), as :meth:`RangeRun.control`.
+
+        Examples
+        --------
+        >>> run = corridor_run(np.random.default_rng(0), n_steps=3)
+        >>> bool(run.control(1) == run.controls[1])
+        True
+        """
+        k = int(k)
+        if not 1 <= k < len(self):
+            raise ValueError(f"k must be in [1, {len(self) - 1}] (step 0 has no motion); got {k}")
+        return float(self.controls[k])
 
     def at_door(self, x: ArrayLike) -> NDArray[np.bool_]:
         """True where position(s) ``x`` face a door.

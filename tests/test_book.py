@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 import jupytext
+import nbformat
 import pytest
 import yaml
 
@@ -103,16 +104,86 @@ def test_readme_commands_present():
     assert 'python -m pip install -e ".[test]" && pytest --nbval' in text
 
 
-@pytest.mark.parametrize("nb_path", NOTEBOOKS, ids=lambda p: p.name)
-def test_solutions_hidden_in_html_book(nb_path):
+def _hide_solutions():
     import sys
 
     sys.path.insert(0, str(ROOT / "tools"))
-    from hide_solutions import is_hidden
+    import hide_solutions
 
-    nb = jupytext.read(nb_path)
-    bad = [k for k, c in enumerate(nb.cells) if not is_hidden(c)]
-    assert not bad, f"{nb_path.name}: solution cells {bad} are not hidden; run python tools/hide_solutions.py"
+    return hide_solutions
+
+
+@pytest.mark.parametrize("nb_path", NOTEBOOKS, ids=lambda p: p.name)
+def test_solutions_hidden_in_jupyterlab_and_html_book(nb_path):
+    """Code solutions open collapsed in JupyterLab (jupyter.source_hidden) and in the book (hide-cell)."""
+    is_hidden = _hide_solutions().is_hidden
+    for which, nb in (("notebook", nbformat.read(nb_path, as_version=4)), ("twin", jupytext.read(nb_path.with_suffix(
+            ".py")))):
+        bad = [k for k, c in enumerate(nb.cells) if not is_hidden(c)]
+        assert not bad, f"{nb_path.name} ({which}): solution cells {bad} are not hidden; run python tools/hide_solutions.py"
+
+
+def _math_free(src: str) -> tuple[str, int]:
+    """Replace $...$ and $$...$$ by placeholders, as JupyterLab does before its markdown parser runs."""
+    n = 0
+
+    def sub(_m):
+        nonlocal n
+        n += 1
+        return f"MATH{n}X"
+
+    return re.sub(r"\$\$.+?\$\$|\$(?:[^$\n]|\n(?!\n))+?\$", sub, src, flags=re.S), n  # not across paragraphs
+
+
+SOLUTION_MD = [(nb.name, k, c.source) for nb in NOTEBOOKS for k, c in enumerate(jupytext.read(nb).cells)
+               if c.cell_type == "markdown" and "solution" in c.metadata.get("tags", [])]
+
+
+def test_there_are_markdown_solutions():
+    assert len(SOLUTION_MD) >= 10
+
+
+@pytest.mark.parametrize("name, k, src", SOLUTION_MD, ids=[f"{n}-{k}" for n, k, _ in SOLUTION_MD])
+def test_markdown_solutions_render_collapsed_in_both(name, k, src):
+    """Render each written-out solution as JupyterLab (CommonMark, math set aside) and MyST (dollarmath) do.
+
+    Both must give one closed ``<details>`` block titled Solution whose inside
+    is rendered markdown (no raw MyST directive, no literal ``**``), with every
+    formula kept whole for MathJax.
+    """
+    from markdown_it import MarkdownIt
+    from mdit_py_plugins.dollarmath import dollarmath_plugin
+
+    lab_src, n_math = _math_free(src)
+    lab = MarkdownIt("commonmark").render(lab_src)
+    myst = MarkdownIt("commonmark").use(dollarmath_plugin).render(src)
+    for who, html in (("JupyterLab", lab), ("Jupyter Book", myst)):
+        where = f"{name} cell {k} in {who}"
+        assert html.lstrip().startswith("<details>") and html.rstrip().endswith("</details>"), where
+        assert html.count("<details") == 1 and "<details open" not in html, where
+        assert re.search(r"<summary>.*Solution.*</summary>", html), where
+        assert "{admonition}" not in html and ":class:" not in html and "````" not in html, where
+        assert "**" not in html, f"{where}: markdown inside <details> was not rendered"
+        assert "<h1" not in html and "<h2" not in html and "<h3" not in html, f"{where}: a heading in a solution"
+    for i in range(1, n_math + 1):
+        assert f"MATH{i}X" in lab, f"{name} cell {k}: formula {i} was split by the markdown parser"
+    assert myst.count('class="math') == n_math, f"{name} cell {k}: MyST did not see every formula as math"
+    assert "$" not in re.sub(r'<(span|div) class="math[^"]*">.*?</\1>', "", myst, flags=re.S), (
+        f"{name} cell {k}: a stray $ is shown as text")
+
+
+def test_hide_solutions_converts_the_old_admonition_form():
+    hs = _hide_solutions()
+    cell = nbformat.v4.new_markdown_cell("````{admonition} Solution\n:class: dropdown, tip\n\n### Part a\n"
+                                         "Take $\\gamma = 1$.\n````", metadata={"tags": ["solution"]})
+    assert not hs.is_hidden(cell)
+    assert hs.hide(cell) and hs.is_hidden(cell)
+    assert "{admonition}" not in cell.source and "**Part a**" in cell.source and "$\\gamma = 1$" in cell.source
+    assert not hs.hide(cell)                      # idempotent
+    code = nbformat.v4.new_code_cell("x = 1", metadata={"tags": ["solution"]})
+    assert not hs.is_hidden(code) and hs.hide(code) and hs.is_hidden(code)
+    assert code.metadata["jupyter"] == {"source_hidden": True, "outputs_hidden": True}
+    assert code.source.splitlines()[0].startswith("# Solution") and not hs.hide(code)
 
 
 @pytest.mark.parametrize("nb_path", NOTEBOOKS, ids=lambda p: p.name)

@@ -25,6 +25,19 @@ def test_report_prints_and_is_truthy():
     assert text.startswith("normalize: all") and "PASS" in text and "FAIL" not in text
 
 
+def test_failure_shows_expected_next_to_seen():
+    text = str(check.bayes_update(lambda b, lik: np.asarray(b) * np.asarray(lik)))
+    seen = [ln for ln in text.splitlines() if ln.strip().startswith("seen:")]
+    expected = [ln for ln in text.splitlines() if ln.strip().startswith("expected:")]
+    assert seen and expected, text
+    ref = discrete.update(np.array([0.05, 0.05, 0.1, 0.2, 0.2, 0.1, 0.1, 0.1, 0.05, 0.05]),
+                          np.where(np.isin(np.arange(10), [0, 1, 8]), 0.6, 0.2))
+    assert f"{ref[0]:.4f}" in expected[-1]
+    # every failed verdict of every check carries an expected value or a hint that names it
+    r = check.histogram_sense(lambda b, w, m, h, mi: histogram.sense(b, w, m, mi, h))
+    assert all(v.expected for v in r.failures if v.detail), r
+
+
 def test_not_implemented_and_wrong_types_never_crash():
     def stub(p):
         raise NotImplementedError
@@ -62,7 +75,9 @@ def test_bayes_update():
 def test_histogram_checks():
     assert check.histogram_sense(histogram.sense)
     assert check.histogram_sense(histogram.sense_readable)
-    fails_with(check.histogram_sense(lambda b, w, m, h, mi: histogram.sense(b, w, m, mi, h)), "swapped")
+    swapped = check.histogram_sense(lambda b, w, m, h, mi: histogram.sense(b, w, m, mi, h))
+    fails_with(swapped, "swapped")
+    assert not any("PRIOR" in h for h in swapped.hints), swapped   # one mistake, one (right) hint
     fails_with(check.histogram_sense(lambda b, w, m, h, mi: histogram.sense(np.full_like(b, 1 / b.size), w, m, h, mi)),
                "PRIOR")
     assert check.histogram_move(lambda b, s, f: histogram.move(b, s, fill=f))
@@ -76,13 +91,14 @@ def test_sample_odometry_reference_passes():
     assert check.sample_odometry(lambda p, u, a, rng: motion.sample_odometry(p, u, a, rng, sign=+1))
 
 
-def _sampler(var_is_std=False, degrees=False, wrap=True):
+def _sampler(var_is_std=False, degrees=False, wrap=True, spot_rule=True, wrap_controls=True):
     def fn(poses, u, alphas, rng):
         a1, a2, a3, a4 = alphas
         (x0, y0, t0), (x1, y1, t1) = u
-        rot1 = math.atan2(y1 - y0, x1 - x0) - t0
+        w = wrap_angle if wrap_controls else (lambda a: a)
         trans = math.hypot(x1 - x0, y1 - y0)
-        rot2 = t1 - t0 - rot1
+        rot1 = w(math.atan2(y1 - y0, x1 - x0) - t0) if (trans > 1e-9 or not spot_rule) else 0.0
+        rot2 = w(t1 - t0 - rot1)
         if degrees:
             rot1, rot2 = math.degrees(rot1), math.degrees(rot2)
         v1 = a1 * rot1**2 + a2 * trans**2
@@ -106,6 +122,13 @@ def test_sample_odometry_mistakes():
     fails_with(check.sample_odometry(_sampler(var_is_std=True)), "VARIANCE")
     fails_with(check.sample_odometry(_sampler(degrees=True)), "radians")
     fails_with(check.sample_odometry(_sampler(wrap=False)), "wrap")
+    # the homework erratum: atan2(0, 0) - theta as rot1 of a turn on the spot
+    no_spot = check.sample_odometry(_sampler(spot_rule=False))
+    fails_with(no_spot, "rot1 = 0")
+    assert [v.name for v in no_spot.failures] == ["a turn on the spot (no translation): samples have the model's "
+                                                  "mean and covariance"], no_spot
+    # rot1 of a backwards move left unwrapped (3.30 instead of -2.98): the variances are off
+    fails_with(check.sample_odometry(_sampler(wrap_controls=False)), "BEFORE computing the noise")
 
     def global_rng(p, u, a, rng):
         return _sampler()(p, u, a, np.random.default_rng())
@@ -117,14 +140,15 @@ def _prob(a, var):
     return math.exp(-0.5 * a * a / var) / math.sqrt(2 * math.pi * var)
 
 
-def _pdf(jacobian=True, normaliser=True, wrap=True):
+def _pdf(jacobian=True, normaliser=True, wrap=True, wrap_controls=True):
     def fn(pose, u, prev, alphas):
         a1, a2, a3, a4 = alphas
         (x0, y0, t0), (x1, y1, t1) = u
         w = wrap_angle if wrap else (lambda a: a)
-        rot1 = w(math.atan2(y1 - y0, x1 - x0) - t0)
+        wc = w if wrap_controls else (lambda a: a)
+        rot1 = wc(math.atan2(y1 - y0, x1 - x0) - t0)
         trans = math.hypot(x1 - x0, y1 - y0)
-        rot2 = w(t1 - t0 - rot1)
+        rot2 = wc(t1 - t0 - rot1)
         x, y, t = pose
         xp, yp, tp = prev
         rot1h = w(math.atan2(y - yp, x - xp) - tp)
@@ -145,14 +169,26 @@ def test_odometry_pdf():
     fails_with(check.odometry_pdf(_pdf(jacobian=False)), "divide by the translation")
     fails_with(check.odometry_pdf(_pdf(normaliser=False)), "normaliser")
     fails_with(check.odometry_pdf(_pdf(wrap=False)), "wrap")
+    # code that does wrap but has another mistake is not told to wrap
+    no_jac = check.odometry_pdf(_pdf(jacobian=False))
+    assert not any("wrap every angle" in h for h in no_jac.hints), no_jac
+    assert "fix that first" in " ".join(no_jac.hints)
+    # measured rot1 of a backwards move left unwrapped: its variance a1 * rot1**2 is off
+    back = check.odometry_pdf(_pdf(wrap_controls=False))
+    fails_with(back, "measured AND the hypothesised")
+    assert [v.name for v in back.failures] == ["a move backwards (rot1 near pi)"], back
 
 
 # ------------------------------------------------------------------ sensors
-def _beam(normalise=True):
+def _beam(normalise=True, mass_only=False, beyond_zero=False):
+    """A student's beam model; the max-range convention of chapter 5 unless told otherwise."""
     def fn(z, z_exp, prm):
         zmax, s, lam = prm["max_range"], prm["sigma_hit"], prm["lambda_short"]
-        if z >= zmax:
+        if z > zmax and beyond_zero:
+            return 0.0
+        if z >= zmax and mass_only:
             return prm["z_max"]
+        z = min(z, zmax)
         hit = math.exp(-0.5 * ((z - z_exp) / s) ** 2) / (s * math.sqrt(2 * math.pi))
         if normalise:
             mass = 0.5 * (math.erf((zmax - z_exp) / (s * math.sqrt(2))) - math.erf(-z_exp / (s * math.sqrt(2))))
@@ -160,7 +196,8 @@ def _beam(normalise=True):
         short = lam * math.exp(-lam * z) if z <= z_exp else 0.0
         if normalise and z <= z_exp:
             short /= 1 - math.exp(-lam * z_exp)
-        return prm["z_hit"] * hit + prm["z_short"] * short + prm["z_rand"] / zmax
+        rest = prm["z_max"] if z >= zmax else prm["z_rand"] / zmax
+        return prm["z_hit"] * hit + prm["z_short"] * short + rest
 
     return fn
 
@@ -168,24 +205,51 @@ def _beam(normalise=True):
 def test_beam_model():
     assert check.beam_model(_beam())
     fails_with(check.beam_model(_beam(normalise=False)), "normalised density")
+    # the homework erratum: the point mass alone at a max-range reading
+    mass_only = check.beam_model(_beam(mass_only=True))
+    fails_with(mass_only, "point mass z_max alone")
+    assert [v.name for v in mass_only.failures] == ["a reading at max range when max range is expected (open space)"]
+    beyond = check.beam_model(_beam(beyond_zero=True))
+    fails_with(beyond, "no return")
+    assert [v.name for v in beyond.failures] == ["a reading beyond max range counts as max range"]
+
+
+def _beam_model_like_check():
+    from localize import maps, sensors
+
+    prm = check.BEAM_PARAMS
+    return prm, sensors.BeamModel(maps.office(), prm["max_range"], z_hit=prm["z_hit"], z_short=prm["z_short"],
+                                  z_max=prm["z_max"], z_rand=prm["z_rand"], sigma_hit=prm["sigma_hit"],
+                                  lambda_short=prm["lambda_short"])
 
 
 def test_beam_oracle_matches_localize_sensors():
-    sensors = pytest.importorskip("localize.sensors")
-    if not hasattr(sensors, "BeamModel"):
-        pytest.skip("localize.sensors.BeamModel not available")
-    from localize import maps
+    prm, model = _beam_model_like_check()
+    z = np.array([0.2, 1.0, 3.9, 4.0, 4.5, 9.0, 10.0, 12.0])
+    for z_exp in (4.0, 9.9, 10.0):
+        ze = np.full_like(z, z_exp)
+        np.testing.assert_allclose(model.pdf(z, ze), check._beam_ref(z, ze, prm), rtol=1e-9)
+        # the fast path takes readings already clipped to max_range (as log_likelihood_expected passes them)
+        np.testing.assert_allclose(np.log(model.pdf(z, ze)),
+                                   model.beam_log_pdf(np.minimum(z, prm["max_range"]), ze[None, :])[0], rtol=1e-6)
 
-    prm = check.BEAM_PARAMS
-    try:
-        model = sensors.BeamModel(maps.office(), prm["max_range"], z_hit=prm["z_hit"], z_short=prm["z_short"],
-                                  z_max=prm["z_max"], z_rand=prm["z_rand"], sigma_hit=prm["sigma_hit"],
-                                  lambda_short=prm["lambda_short"])
-    except TypeError as err:
-        pytest.skip(f"BeamModel signature differs: {err}")
-    z = np.array([0.2, 1.0, 3.9, 4.0, 4.5, 9.0, 10.0])
-    np.testing.assert_allclose(model.pdf(z, np.full_like(z, 4.0)), check._beam_ref(z, np.full_like(z, 4.0), prm),
-                               rtol=1e-9)
+
+def test_max_range_convention_is_density_plus_mass():
+    """One convention at z = max_range (chapter 5): the continuous densities there PLUS the point mass z_max."""
+    prm, model = _beam_model_like_check()
+    zmax = prm["max_range"]
+    c = model.components(zmax, zmax)
+    assert float(c["p_max"]) == 1.0 and float(c["p_rand"]) == 0.0
+    hit = 1 / (prm["sigma_hit"] * math.sqrt(2 * math.pi)) / 0.5       # half the Gaussian lies inside [0, zmax]
+    short = prm["lambda_short"] * math.exp(-prm["lambda_short"] * zmax) / (1 - math.exp(-prm["lambda_short"] * zmax))
+    want = prm["z_hit"] * hit + prm["z_short"] * short + prm["z_max"]
+    assert float(model.pdf(zmax, zmax)) == pytest.approx(want, rel=1e-12)
+    assert float(check._beam_ref(np.array([zmax]), np.array([zmax]), prm)[0]) == pytest.approx(want, rel=1e-12)
+    assert _beam()(zmax, zmax, dict(prm)) == pytest.approx(want, rel=1e-12)
+    assert want == pytest.approx(2.84, abs=0.01)       # the value the issue quotes for the library
+    # far from open space the max-range reading is (almost) the mass alone, and beyond max range is the same
+    assert float(model.pdf(zmax, 4.0)) == pytest.approx(prm["z_max"], rel=1e-9)
+    assert float(model.pdf(zmax + 3.0, 4.0)) == float(model.pdf(zmax, 4.0))
 
 
 def _scan(mode):
@@ -254,6 +318,22 @@ def test_low_variance_mistakes():
     fails_with(check.low_variance_sampler(_low_variance(no_guard=True)), "cumsum")
 
 
+def _searchsorted_systematic(clip=True):
+    def fn(w, rng):
+        n = len(w)
+        c = np.cumsum(w)
+        c[-1] = 1.0
+        idx = np.searchsorted(c, rng.uniform(0, 1.0 / n) + np.arange(n) / n, side="right")
+        return np.minimum(idx, n - 1) if clip else idx
+
+    return fn
+
+
+def test_searchsorted_right_needs_a_clip():
+    assert check.low_variance_sampler(_searchsorted_systematic())
+    fails_with(check.low_variance_sampler(_searchsorted_systematic(clip=False)), "side='right'")
+
+
 def test_filterpy_residual_is_caught_as_biased():
     from filterpy.monte_carlo import residual_resample
 
@@ -271,10 +351,11 @@ def test_effective_sample_size():
 
 
 # ------------------------------------------------------------------ MCL
-def _mcl(log_space=True, resample_by_weight=True, move=True):
+def _mcl(log_space=True, resample_by_weight=True, move=True, weigh_first=False):
     def fn(particles, u, ranges, angles, motion_model, sensor, rng):
+        ll = sensor(particles, ranges, angles) if weigh_first else None
         p = motion_model(particles, u, rng) if move else particles.copy()
-        ll = sensor(p, ranges, angles)
+        ll = sensor(p, ranges, angles) if ll is None else ll
         if log_space:
             w = np.exp(ll - ll.max())
         else:
@@ -294,3 +375,179 @@ def test_mcl_step():
         fails_with(check.mcl_step(_mcl(log_space=False)), "log-sum-exp")
     fails_with(check.mcl_step(_mcl(resample_by_weight=False)), "proportional to w")
     fails_with(check.mcl_step(_mcl(move=False)), "motion(particles, u, rng)")
+    before = check.mcl_step(_mcl(weigh_first=True))
+    fails_with(before, "BEFORE moving")
+    assert [v.name for v in before.failures] == ["weights the particles after moving them"], before
+
+
+# ------------------------------------------------------------------ new exercises: preface, ch. 3, 8, 9, 10
+def _world_to_cell(order="ij", rounding=np.floor, origin=True, as_int=True):
+    def fn(points, org, res):
+        rel = (np.asarray(points, float) - (org if origin else 0.0)) / res
+        ij = rounding(rel[:, ::-1] if order == "ij" else rel)
+        return ij.astype(int) if as_int else ij
+
+    return fn
+
+
+def test_world_to_cell():
+    assert check.world_to_cell(_world_to_cell())
+    fails_with(check.world_to_cell(_world_to_cell(order="ji")), "(column, row)")
+    fails_with(check.world_to_cell(_world_to_cell(rounding=np.round)), "np.floor, not np.round")
+    fails_with(check.world_to_cell(_world_to_cell(origin=False)), "subtract the origin")
+    fails_with(check.world_to_cell(_world_to_cell(as_int=False)), ".astype(int)")
+
+
+def _grid_update(roll=1, offsets=True, logs=True, prior=True):
+    def fn(belief, expected, beam_bins, ranges, beam_pdf):
+        k = belief.shape[0]
+        ll = np.zeros(belief.shape)
+        for b, z in zip(beam_bins, ranges):
+            ll += np.log(beam_pdf(z, expected[(np.arange(k) + roll * (b if offsets else 0)) % k]))
+        like = np.exp(ll - ll.max()) if logs else np.exp(ll)
+        post = (belief if prior else 1.0) * like
+        return post / post.sum()
+
+    return fn
+
+
+def test_grid_update():
+    assert check.grid_update(_grid_update())
+    fails_with(check.grid_update(_grid_update(roll=-1)), "wrong way")
+    fails_with(check.grid_update(_grid_update(offsets=False)), "add the beam's offset")
+    fails_with(check.grid_update(_grid_update(prior=False)), "ignored the prior")
+    with np.errstate(all="ignore"):
+        underflow = check.grid_update(_grid_update(logs=False))
+    fails_with(underflow, "log-likelihoods")
+    assert [v.name for v in underflow.failures] == ["360 beams do not underflow (work in log space)"]
+
+
+def _map_image(flip=True, invert=False, use_negate=True, unknown=np.nan):
+    def fn(image, negate):
+        v = np.asarray(image, float)
+        if invert:
+            v = 255 - v
+        p = v / 255 if (negate and use_negate) else (255 - v) / 255
+        occ = np.full(p.shape, unknown)
+        occ[p > 0.65] = 1.0
+        occ[p < 0.196] = 0.0
+        return np.flipud(occ) if flip else occ
+
+    return fn
+
+
+def test_map_image():
+    assert check.map_image(_map_image())
+    fails_with(check.map_image(_map_image(flip=False)), "np.flipud")
+    fails_with(check.map_image(_map_image(invert=True)), "white means FREE")
+    fails_with(check.map_image(_map_image(use_negate=False)), "ignored negate")
+    fails_with(check.map_image(_map_image(unknown=0.5)), "UNKNOWN")
+
+
+def _injection(normalised=False, upside_down=False, clip=True, swap_alphas=False):
+    def fn(lik, w_slow, w_fast, a_slow, a_fast):
+        lik = np.asarray(lik, float)
+        if normalised:
+            lik = lik / lik.sum()
+        if swap_alphas:
+            a_slow, a_fast = a_fast, a_slow
+        w_avg = float(lik.mean())
+        w_slow += a_slow * (w_avg - w_slow)
+        w_fast += a_fast * (w_avg - w_fast)
+        p = 1 - (w_slow / w_fast if upside_down else w_fast / w_slow)
+        return w_slow, w_fast, max(0.0, p) if clip else p
+
+    return fn
+
+
+def test_injection():
+    assert check.injection(_injection())
+    with np.errstate(all="ignore"):
+        fails_with(check.injection(_injection(normalised=True)), "NORMALISED weights")
+    fails_with(check.injection(_injection(upside_down=True)), "upside down")
+    fails_with(check.injection(_injection(clip=False)), "cannot be negative")
+    fails_with(check.injection(_injection(swap_alphas=True)), "alpha_slow belongs to w_slow")
+
+
+def test_injection_check_agrees_with_augmented_mcl():
+    """The check's rule is the library's: MCL's averages after one update, in log space, match it."""
+    from localize import mcl
+
+    lik = np.array([0.02, 0.05, 0.08, 0.05])
+    aug = mcl.Augmented(alpha_slow=0.05, alpha_fast=0.5)
+    class Flat:
+        def log_likelihood(self, poses, *z):
+            return np.zeros(len(poses))
+
+    f = mcl.MCL(np.zeros((4, 3)), lambda p, u, rng: p, Flat(), rng=np.random.default_rng(0), augmented=aug,
+                sampler=lambda n, rng: np.zeros((n, 3)))
+    f.status.log_w_slow = f.status.log_w_fast = math.log(0.5)
+    f._update_averages(math.log(lik.mean()))
+    ws, wf, p = _injection()(lik, 0.5, 0.5, 0.05, 0.5)
+    assert math.exp(f.status.log_w_slow) == pytest.approx(ws) and math.exp(f.status.log_w_fast) == pytest.approx(wf)
+    assert f.status.p_inject == pytest.approx(p)
+
+
+def _ekf(wrap_innovation=True, inverse=True, update_cov=True, wrap_heading=True):
+    from localize.ekf import landmark_jacobian, landmark_measurement
+
+    def fn(mean, cov, z, m, q):
+        h = landmark_jacobian(mean, m)
+        s = h @ cov @ h.T + q
+        k = cov @ h.T @ (np.linalg.inv(s) if inverse else s)
+        y = z - landmark_measurement(mean, m)
+        if wrap_innovation:
+            y[1] = wrap_angle(y[1])
+        mu = mean + k @ y
+        if wrap_heading:
+            mu[2] = wrap_angle(mu[2])
+        return mu, (np.eye(3) - k @ h) @ cov if update_cov else cov
+
+    return fn
+
+
+def test_ekf_update():
+    assert check.ekf_update(_ekf())
+    fails_with(check.ekf_update(_ekf(wrap_innovation=False)), "innovation z - z_hat is not wrapped")
+    fails_with(check.ekf_update(_ekf(inverse=False)), "instead of its inverse")
+    fails_with(check.ekf_update(_ekf(update_cov=False)), "must shrink")
+    fails_with(check.ekf_update(_ekf(wrap_heading=False)), "wrap the new heading")
+
+
+def test_ekf_check_agrees_with_the_library_filter():
+    from localize.ekf import EKFLocalizer
+
+    f = EKFLocalizer(np.array([[5.0, -0.1]]), 0.2, 0.05, [0.0] * 6, mean=[0.0, 0.0, 3.12],
+                     cov=np.diag([0.25, 0.25, 0.01]))
+    f.update(np.array([[4.8, 3.05]]), ids=[0])
+    mu, cov = _ekf()(np.array([0.0, 0.0, 3.12]), np.diag([0.25, 0.25, 0.01]), np.array([4.8, 3.05]),
+                     np.array([5.0, -0.1]), np.diag([0.04, 0.0025]))
+    np.testing.assert_allclose(f.mean[:2], mu[:2], atol=1e-9)
+    assert abs(wrap_angle(f.mean[2] - mu[2])) < 1e-9
+    np.testing.assert_allclose(f.cov, cov, atol=1e-9)
+
+
+def test_every_failure_with_a_seen_value_shows_the_expected_one():
+    """On failure a report puts the right answer next to the student's, for every check and mistake tested here."""
+    reports = [
+        check.normalize(lambda p: np.asarray(p, float)),
+        check.bayes_update(lambda b, lik: np.asarray(b) * np.asarray(lik)),
+        check.histogram_sense(lambda b, w, m, h, mi: histogram.sense(b, w, m, mi, h)),
+        check.histogram_move(lambda b, s, f: np.roll(b, s, axis=(0, 1))),
+        check.sample_odometry(_sampler(var_is_std=True)), check.sample_odometry(_sampler(spot_rule=False)),
+        check.odometry_pdf(_pdf(jacobian=False)), check.odometry_pdf(_pdf(wrap=False)),
+        check.beam_model(_beam(normalise=False)), check.beam_model(_beam(mass_only=True)),
+        check.scan_log_likelihood(_scan("sum")),
+        check.low_variance_sampler(_low_variance(wide_offset=True)),
+        check.low_variance_sampler(_low_variance(no_guard=True)),
+        check.effective_sample_size(lambda w: 1.0 / float(np.sum(np.square(w)))),
+        check.mcl_step(_mcl(move=False)), check.mcl_step(_mcl(weigh_first=True)),
+        check.world_to_cell(_world_to_cell(order="ji")), check.grid_update(_grid_update(roll=-1)),
+        check.map_image(_map_image(flip=False)), check.injection(_injection(upside_down=True)),
+        check.ekf_update(_ekf(inverse=False)),
+    ]
+    for r in reports:
+        assert not r, r
+        for v in r.failures:
+            assert not v.detail or v.expected, f"{r.subject}: {v.name!r} shows {v.detail!r} without the expected value"
+            assert "expected:" in str(r) or not v.detail

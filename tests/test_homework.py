@@ -39,7 +39,7 @@ def test_template_is_generated_from_solutions():
 def test_template_has_stubs_and_no_solutions():
     nb = nbformat.read(HW / "homework.ipynb", as_version=4)
     code = "\n".join(c.source for c in nb.cells if c.cell_type == "code")
-    assert code.count("raise NotImplementedError") == 12
+    assert code.count("raise NotImplementedError") == 17
     assert "np.searchsorted" not in code and "math.erf" not in code
     assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code")
 
@@ -48,11 +48,11 @@ def test_template_has_stubs_and_no_solutions():
 def test_solutions_pass_every_check(tmp_path):
     text = _run(jupytext.read(HW / "homework_solutions.py"), tmp_path)
     assert "FAILED" not in text, text
-    assert text.count("checks passed") == 12, text
+    assert text.count("checks passed") == 17, text
 
 
 @pytest.mark.slow
 def test_student_template_fails_gracefully(tmp_path):
     text = _run(nbformat.read(HW / "homework.ipynb", as_version=4), tmp_path)
-    assert text.count("checks FAILED") == 12, text
-    assert text.count("replace `raise NotImplementedError`") >= 12
+    assert text.count("checks FAILED") == 17, text
+    assert text.count("replace `raise NotImplementedError`") >= 17

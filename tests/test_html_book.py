@@ -343,3 +343,24 @@ def test_screenshot_of_the_first_page(request, tmp_path_factory):
     tr = request.config.pluginmanager.get_plugin("terminalreporter")
     if tr is not None:
         tr.write_line(f"\nHTML book: built in {book.seconds:.1f} s; screenshot of {first}: {out}")
+
+
+def test_solutions_collapsed_in_html_book(html_book):
+    """Written-out solutions are closed <details> blocks with rendered math; code solutions sit behind a toggle."""
+    book = html_book
+    for doc in toc_files():
+        src = _source(doc)
+        if src is None or src.suffix != ".ipynb":
+            continue
+        nb = nbformat.read(src, as_version=4)
+        sol = [c for c in nb.cells if "solution" in c.metadata.get("tags", [])]
+        n_md = sum(c.cell_type == "markdown" for c in sol)
+        n_code = sum(c.cell_type == "code" for c in sol)
+        text = (book.html / f"{doc}.html").read_text(encoding="utf-8")
+        assert "{admonition}" not in text and ":class: dropdown" not in text, f"{doc}: raw MyST markup in the page"
+        blocks = re.findall(r"<details>(.*?)</details>", text, re.S)
+        assert len(blocks) >= n_md, f"{doc}: {n_md} written solutions but {len(blocks)} <details> blocks"
+        for b in blocks:
+            assert "<summary>" in b and "Solution" in b, f"{doc}: a <details> block without its summary"
+            assert "$" not in re.sub(r"<[^>]+>", "", b), f"{doc}: unrendered $math$ inside a solution"
+        assert text.count("tag_hide-cell") >= n_code, f"{doc}: a code solution is not behind a toggle"

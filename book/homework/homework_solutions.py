@@ -40,6 +40,25 @@ from localize import check
 from localize.geometry import wrap_angle
 
 # %% [markdown]
+# ## 0. Which cell is a point in? (preface)
+#
+# Write `world_to_cell(points, origin, resolution)`: for `(N, 2)` world points
+# `(x, y)`, a map origin `(x0, y0)` and cells of `resolution` metres, return the
+# `(N, 2)` **integer** array of `(row, column)` indices in the convention of
+# `localize.OccupancyGrid`: column $j$ covers $x_0 + j r \le x < x_0 + (j+1) r$
+# and row $i$ covers $y_0 + i r \le y < y_0 + (i+1) r$ (rows grow with $y$).
+
+# %% tags=["solution"]
+def world_to_cell(points, origin, resolution):
+    """(row, column) of the cells holding each point."""
+    rel = (np.asarray(points, dtype=float) - np.asarray(origin, dtype=float)) / resolution
+    return np.floor(rel[:, ::-1]).astype(int)
+
+
+# %%
+check.world_to_cell(world_to_cell)
+
+# %% [markdown]
 # ## 1. Normalising a belief (chapter 1)
 #
 # Write `normalize(p)` that returns a *new* array with the entries of `p`
@@ -116,7 +135,11 @@ print(check.histogram_move(histogram_move))
 # Gaussian noise of *variance* $\alpha_1\delta_{rot1}^2 + \alpha_2\delta_{trans}^2$,
 # $\alpha_3\delta_{trans}^2 + \alpha_4(\delta_{rot1}^2 + \delta_{rot2}^2)$ and
 # $\alpha_1\delta_{rot2}^2 + \alpha_2\delta_{trans}^2$ (Probabilistic Robotics,
-# table 5.6), and move every pose. Use `rng` for all random numbers.
+# table 5.6), and move every pose. Use `rng` for all random numbers. Two motions
+# need care, and the check tests both: a **turn on the spot** (no translation:
+# $\operatorname{atan2}(0, 0)$ means nothing, so $\delta_{rot1} = 0$ and
+# $\delta_{rot2}$ is the whole turn, as chapter 4 does) and a **move backwards**
+# ($\delta_{rot1}$ near $\pm\pi$: wrap the angles before computing the variances).
 #
 # `odometry_pdf(pose, u, prev_pose, alphas)` is the density of one pose
 # over $(x, y, \theta)$: PR table 5.5 with the variances evaluated at the
@@ -124,9 +147,10 @@ print(check.histogram_move(histogram_move))
 
 # %% tags=["solution"]
 def _control(prev, cur, theta):
-    rot1 = wrap_angle(math.atan2(cur[1] - prev[1], cur[0] - prev[0]) - theta)
     trans = math.hypot(cur[0] - prev[0], cur[1] - prev[1])
-    return rot1, trans
+    if trans < 1e-9:  # a turn on the spot: atan2(0, 0) means nothing, the whole turn is rot2
+        return 0.0, trans
+    return wrap_angle(math.atan2(cur[1] - prev[1], cur[0] - prev[0]) - theta), trans
 
 
 def sample_odometry(poses, u, alphas, rng):
@@ -177,6 +201,12 @@ print(check.odometry_pdf(odometry_pdf))
 # $[0, z_{max})$. `params` holds `z_hit, z_short, z_max, z_rand, sigma_hit,
 # lambda_short, max_range`.
 #
+# A reading at max range follows chapter 5's convention (that of PR table 6.1
+# and of `localize.sensors.BeamModel`): a reading beyond `max_range` counts as
+# `max_range`, and there the point mass `z_max` is *added* to the continuous
+# densities at that reading (the hit Gaussian, and the short part if
+# $z^* = z_{max}$); the uniform part is zero there.
+#
 # `scan_log_likelihood(ranges, expected, params)`: the log-likelihood of a
 # whole scan, assuming the beams are independent.
 
@@ -184,12 +214,13 @@ print(check.odometry_pdf(odometry_pdf))
 def beam_pdf(z, z_expected, params):
     """Beam-model density of one reading."""
     zmax, s, lam = params["max_range"], params["sigma_hit"], params["lambda_short"]
-    if z >= zmax:
-        return params["z_max"]
+    z, z_expected = min(z, zmax), min(z_expected, zmax)  # beyond max range = no return = max range
     mass = 0.5 * (math.erf((zmax - z_expected) / (s * math.sqrt(2))) - math.erf(-z_expected / (s * math.sqrt(2))))
     p_hit = math.exp(-0.5 * ((z - z_expected) / s) ** 2) / (s * math.sqrt(2 * math.pi)) / mass
     p_short = lam * math.exp(-lam * z) / (1 - math.exp(-lam * z_expected)) if z <= z_expected else 0.0
-    return params["z_hit"] * p_hit + params["z_short"] * p_short + params["z_rand"] / zmax
+    # at max range: the point mass z_max, added to the densities there; below it: the uniform density
+    rest = params["z_max"] if z >= zmax else params["z_rand"] / zmax
+    return params["z_hit"] * p_hit + params["z_short"] * p_short + rest
 
 
 def scan_log_likelihood(ranges, expected, params):
@@ -262,3 +293,100 @@ def mcl_step(particles, u, ranges, angles, motion, sensor, rng):
 
 # %%
 check.mcl_step(mcl_step)
+
+# %% [markdown]
+# ## 8. The correction step of grid localization (chapter 3)
+#
+# `grid_update(belief, expected, beam_bins, ranges, beam_pdf)`: the belief and
+# the expected ranges are `(K, H, W)` arrays over heading bin, row and column;
+# `expected[k, i, j]` is the range seen from cell `(i, j)` along the *absolute*
+# heading bin `k`. Beam `b` sits `beam_bins[b]` bins to the left of the robot's
+# heading, so for a robot in bin `k` it looks along bin `(k + beam_bins[b]) % K`.
+# Return the posterior: the belief times the product over beams of
+# `beam_pdf(ranges[b], expected_along_that_beam)`, normalised. A scan of
+# hundreds of beams underflows as a product: add logs.
+
+# %% tags=["solution"]
+def grid_update(belief, expected, beam_bins, ranges, beam_pdf):
+    """Multiply the (K, H, W) belief by the scan likelihood, in log space, and normalise."""
+    k = np.arange(belief.shape[0])
+    log_lik = np.zeros(belief.shape)
+    for b, z in zip(beam_bins, ranges):
+        log_lik += np.log(beam_pdf(z, expected[(k + b) % len(k)]))
+    posterior = np.asarray(belief, dtype=float) * np.exp(log_lik - log_lik.max())
+    return posterior / posterior.sum()
+
+
+# %%
+check.grid_update(grid_update)
+
+# %% [markdown]
+# ## 9. When to inject random particles: augmented MCL (chapter 8)
+#
+# `injection(likelihoods, w_slow, w_fast, alpha_slow, alpha_fast)`: given the
+# measurement likelihoods $p(z \mid x_i)$ of the (equally weighted) particles,
+# update the long- and short-term averages of PR table 8.3 and return
+# `(w_slow, w_fast, p_inject)` with $p_{inject} = \max(0, 1 - w_{fast}/w_{slow})$.
+# Which average of the likelihoods is it, and why not of the normalised weights?
+
+# %% tags=["solution"]
+def injection(likelihoods, w_slow, w_fast, alpha_slow, alpha_fast):
+    """One update of augmented MCL's averages and the injection probability."""
+    w_avg = float(np.mean(likelihoods))  # raw likelihoods: normalised weights always average 1/N
+    w_slow += alpha_slow * (w_avg - w_slow)
+    w_fast += alpha_fast * (w_avg - w_fast)
+    return w_slow, w_fast, max(0.0, 1.0 - w_fast / w_slow)
+
+
+# %%
+check.injection(injection)
+
+# %% [markdown]
+# ## 10. Reading a ROS map picture (chapter 9)
+#
+# `map_image(image, negate)`: `image` is a `map_server` picture as stored in its
+# PGM file, an `(H, W)` array of grey values 0-255 whose **first row is the top**
+# of the map. Return occupancy in `localize.OccupancyGrid`'s convention (row 0
+# at the bottom): $p = (255 - v)/255$ ($v/255$ when `negate`), 1.0 where
+# $p > 0.65$, 0.0 where $p < 0.196$, NaN (unknown) in between.
+
+# %% tags=["solution"]
+def map_image(image, negate):
+    """Occupancy (1 wall, 0 free, NaN unknown) of a map_server picture, row 0 = the bottom of the map."""
+    v = np.asarray(image, dtype=float)
+    p = v / 255.0 if negate else (255.0 - v) / 255.0
+    occupancy = np.full(p.shape, np.nan)
+    occupancy[p > 0.65] = 1.0
+    occupancy[p < 0.196] = 0.0
+    return np.flipud(occupancy)
+
+
+# %%
+check.map_image(map_image)
+
+# %% [markdown]
+# ## 11. One EKF correction with a landmark (chapter 10)
+#
+# `ekf_update(mean, cov, z, landmark, Q)`: the pose belief $\mathcal N(\mu, \Sigma)$,
+# a range-bearing sighting `z` of the landmark at `landmark = (m_x, m_y)` with
+# noise covariance `Q`. Return the corrected `(mean, cov)` (PR table 7.2, lines
+# 12-21). `localize.ekf.landmark_measurement` and `landmark_jacobian` give
+# $\hat z$ and $H$ if you want them.
+
+# %% tags=["solution"]
+def ekf_update(mean, cov, z, landmark, Q):
+    """EKF measurement update with one range-bearing sighting."""
+    from localize.ekf import landmark_jacobian, landmark_measurement
+
+    H = landmark_jacobian(mean, landmark)
+    S = H @ cov @ H.T + Q
+    K = cov @ H.T @ np.linalg.inv(S)
+    innovation = np.asarray(z, dtype=float) - landmark_measurement(mean, landmark)
+    innovation[1] = wrap_angle(innovation[1])  # a bearing near +-pi
+    new_mean = np.asarray(mean, dtype=float) + K @ innovation
+    new_mean[2] = wrap_angle(new_mean[2])
+    return new_mean, (np.eye(3) - K @ H) @ cov
+
+
+# %%
+check.ekf_update(ekf_update)
