@@ -43,7 +43,7 @@ from scipy.special import ndtr, ndtri
 
 from .geometry import as_poses, wrap_angle
 from .grid import OccupancyGrid
-from .raycast import RayCaster, _check_angles, _check_grid, _check_max_range
+from .raycast import RayCaster, _check_angles, _check_grid, _check_max_range, coded_sum
 
 __all__ = ["BeamModel", "LikelihoodField", "LandmarkModel", "check_ranges", "sensor_poses", "select_beams"]
 
@@ -445,8 +445,15 @@ class BeamModel:
         True
         """
         z, a = self._prepare(ranges, angles)
-        zs = self.expected(poses, a, dtype=np.float32)
-        ll = self.beam_log_pdf(z, zs).sum(axis=1, dtype=np.float64)
+        if self.caster is not None and self.caster.coded:
+            # expected ranges as 8-bit codes: score each beam at the 256 code levels once,
+            # then one lookup per beam (same values as beam_log_pdf at the decoded ranges)
+            codes, levels = self.caster.cast_codes(sensor_poses(poses, self.sensor_offset), a)
+            per_level = self.beam_log_pdf(z, np.broadcast_to(levels[:, None], (levels.size, z.size)))
+            ll = coded_sum(codes, np.ascontiguousarray(per_level.T, dtype=np.float32))
+        else:
+            zs = self.expected(poses, a, dtype=np.float32)
+            ll = self.beam_log_pdf(z, zs).sum(axis=1, dtype=np.float64)
         return ll * self.temper if self.temper != 1.0 else ll
 
     def sample_expected(self, expected: ArrayLike, rng: np.random.Generator) -> NDArray[np.float64]:
