@@ -30,7 +30,7 @@ those expected ranges three ways, all returning the same ``(N, B)`` array:
     for the cells a sensor can stand in (not obstacles), 8-bit range codes
     (``max_range / 255`` metres per step) and as many heading bins as fit a
     memory budget (``table_mb``, default 90 MB; at most 360 bins). An
-    800 x 800 map at 144-146 bins takes under 90 MB and builds in about a
+    800 x 800 map at 140 bins (2.6 degrees) takes 88 MB and builds in about a
     second; a cast is one byte lookup. The codes feed the beam model
     directly (:meth:`RayCaster.cast_codes`): it scores every beam against the
     256 possible expected ranges once per scan and then looks the scores up,
@@ -295,7 +295,7 @@ class RayCaster:
     least 93% of the rays from random poses on random maps of rooms and boxes
     within it at 144 and 360 bins (95-96% do at 144 bins, 97% on
     :func:`localize.maps.office`). On the 800 x 800 benchmark map at 10 cm
-    with a 30 m range and the 142 bins that fit 90 MB, 96.5% of the rays are
+    with a 30 m range and its default 140 bins, 96.5% of the rays are
     within the bound (the 360-bin 16-bit table: 97.6% within its own);
     the median error is 5 cm, the 90th percentile 20 cm
     (``benchmarks/bench_raycast.py`` measures it).
@@ -437,18 +437,35 @@ class RayCaster:
         return padded
 
     @cached_property
-    def _clearance32(self) -> NDArray[np.float32]:
-        return self.clearance.astype(np.float32).ravel()
+    def _clearance8(self) -> NDArray[np.uint8]:
+        """The clearance in quarter cells, rounded down, as bytes: 0-252, capped at 63 cells.
+
+        253 marks the border outside the map, 254 obstacles. A byte per cell
+        keeps the field in the processor's cache (640 kB for 800 x 800
+        cells), which makes the march's lookups several times cheaper than
+        from a float field; rounding down keeps every jump safe.
+        """
+        c = self.clearance
+        q = np.minimum(np.floor(4.0 * np.maximum(c, 0.0)), 252.0)
+        q[c == -2.0] = 253
+        q[c == -1.0] = 254
+        return q.astype(np.uint8).ravel()
 
     def _march(self, p: NDArray, a: NDArray, inside: NDArray) -> NDArray[np.float64]:
         """Vectorised march: jump by the clearance, or to just past the next cell boundary.
 
         All rays advance together; finished rays (hit an obstacle, left the
         map, or travelled ``max_range``) are dropped from the working set.
-        State is float32 (positions to ~1e-4 cell); the range of a hit is
-        recomputed in float64 from the ray's start and end points. Rays
-        still running after an iteration cap (which the geometry never
-        reaches in practice) are finished by the exact cell walk.
+        Each axis is mirrored for rays that travel towards -x (-y)
+        (``u = -x``), so that every ray moves towards +u and +v: a point on a
+        cell boundary then always belongs to the cell ahead, and the step to
+        the next boundary is ``(floor(u) + 1 - u) / |dx|``. Finished rays are
+        recorded by index and the working set is compacted with ``take``
+        once a quarter of it is done (frozen until then). State is float32 (positions to
+        ~1e-4 cell); the range of a hit is recomputed in float64 from the
+        ray's start and the hit cell. Rays still running after an iteration
+        cap (which the geometry never reaches in practice) are finished by
+        the exact cell walk.
         """
         grid = self.grid
         res = grid.resolution
@@ -458,14 +475,11 @@ class RayCaster:
         if rows_in.size == 0:
             return out
         f32 = np.float32
-        field = self._clearance32
-        wp = grid.shape[1] + 2
+        field = self._clearance8
+        hp, wp = grid.shape[0] + 2, grid.shape[1] + 2
         limit = f32(self.max_range / res)
         eps = f32(1e-4)
-        # Starting points in cell units of the padded grid. Each axis is mirrored
-        # for rays that travel towards -x (-y), so that every ray moves towards
-        # +u (+v): a point on a cell boundary then always belongs to the cell
-        # ahead, and the step to the next boundary is (floor(u) + 1 - u) / |dx|.
+        # starting points in cell units of the padded grid
         x0 = (p[rows_in, 0] - grid.origin[0]) / res + 1.0
         y0 = (p[rows_in, 1] - grid.origin[1]) / res + 1.0
         m = rows_in.size * b
@@ -474,55 +488,86 @@ class RayCaster:
         ca, sa = np.cos(a)[None, :], np.sin(a)[None, :]
         dx = (ct * ca - st * sa).ravel()
         dy = (st * ca + ct * sa).ravel()
-        sx = np.where(dx < 0, f32(-1.0), f32(1.0))
-        sy = np.where(dy < 0, f32(-1.0), f32(1.0))
-        # rows: u, v, |dx|, |dy|, t, index coefficients A, B, C, then scratch floor(u), floor(v), clearance
-        state = np.empty((11, m), f32)
-        u, v, adx, ady, t, ka, kb, kc = state[:8]
-        u[:] = np.repeat(x0, b)
-        u *= sx
-        v[:] = np.repeat(y0, b)
-        v *= sy
+        neg_x, neg_y = dx < 0, dy < 0
+        # rows: u, v (mirrored position), |dx|, |dy|, t (cells travelled), and the coefficients
+        # of the cell index: row * wp + column = A * floor(v) + B * floor(u) + C
+        state = np.empty((8, m), f32)
+        u, v, adx, ady, t, ka, kb, kc = state
+        sx = np.where(neg_x, f32(-1.0), f32(1.0))
+        sy = np.where(neg_y, f32(-1.0), f32(1.0))
+        np.multiply(np.repeat(x0, b), sx, out=u, casting="unsafe")
+        np.multiply(np.repeat(y0, b), sy, out=v, casting="unsafe")
         np.maximum(np.abs(dx), 1e-6, out=adx, casting="unsafe")
         np.maximum(np.abs(dy), 1e-6, out=ady, casting="unsafe")
         t[:] = 0.0
-        # flat cell index = row * wp + column, with column = sx * floor(u) + (sx - 1) / 2 (rows alike)
         np.multiply(sy, wp, out=ka)
         kb[:] = sx
         kc[:] = (sy - 1) / 2 * wp + (sx - 1) / 2
-        ray = np.arange(m, dtype=np.int64)
-        hit_k = np.full(m, -1, dtype=np.int64)
+        ray = np.arange(m, dtype=np.int32)
+        hit_k = np.full(m, -1, dtype=np.int64)  # index of each ray's hit cell
+        # the first jump, once per pose: all beams of a pose start in the same cell
+        k0 = np.floor(y0).astype(np.int64) * wp + np.floor(x0).astype(np.int64)
+        f0 = field.take(k0)
+        buried = f0 >= 253  # the sensor is in an obstacle: all its beams read 0
+        if buried.any():
+            hit_k.reshape(-1, b)[buried] = k0[buried, None]
+            alive = np.repeat(~buried, b)
+            state, ray = state[:, alive], ray[alive]
+            u, v, adx, ady, t, ka, kb, kc = state
+            f0 = f0[~buried]
+        jump = np.repeat(np.multiply(f0, f32(0.25)), b)
+        t[:] = jump
+        u += jump * adx
+        v += jump * ady
+        # scratch, used as views of the first `size` entries; cell indices are exact in
+        # float32 below 2**24 cells
+        scratch = np.empty((3, m), f32)
+        fbuf = np.empty(m, np.uint8)
+        kbuf = np.empty(m, f32 if hp * wp < 2**24 else np.float64)
+        ibuf = np.empty(m, np.int32 if hp * wp < 2**31 else np.int64)
         cap = int(4 * limit) + 100
         fallback = ray[:0]
         for _ in range(cap):
-            u, v, adx, ady, t, ka, kb, kc, fu, fv, f = state
+            size = ray.size
+            fu, fv, f = scratch[:, :size]
+            kf, k = kbuf[:size], ibuf[:size]
             np.floor(u, out=fu)
             np.floor(v, out=fv)
-            kf = fv * ka
-            kf += fu * kb
+            np.multiply(fv, ka, out=kf)
             kf += kc
-            k = kf.astype(np.int32)
-            field.take(k, out=f, mode="clip")
-            done = f < 0
+            np.multiply(fu, kb, out=f)  # f is free until the lookup
+            kf += f
+            np.copyto(k, kf, casting="unsafe")
+            f8 = fbuf[:size]
+            field.take(k, out=f8, mode="clip")
+            done = f8 >= 253
             done |= t >= limit
             n_done = np.count_nonzero(done)
             if n_done:
-                hit = f == -1.0
+                hit = f8 == 254
                 hit &= t < limit
-                if hit.any():
-                    hit_k[ray[hit]] = k[hit]
-                if 4 * n_done >= ray.size:
+                h = np.flatnonzero(hit)
+                if h.size:
+                    hit_k[ray.take(h)] = k.take(h)
+                if 4 * n_done >= size:
                     # drop the finished rays from the working set
-                    keep = ~done
-                    state = np.compress(keep, state, axis=1)
-                    ray = np.compress(keep, ray)
-                    if ray.size == 0:
+                    keep = np.flatnonzero(~done)
+                    if keep.size == 0:
                         break
-                    u, v, adx, ady, t, ka, kb, kc, fu, fv, f = state
+                    f_keep = f8.take(keep)
+                    state = state.take(keep, axis=1)
+                    ray = ray.take(keep)
+                    u, v, adx, ady, t, ka, kb, kc = state
+                    fu, fv, f = scratch[:, :keep.size]
+                    np.floor(u, out=fu)
+                    np.floor(v, out=fv)
+                    f8 = fbuf[:keep.size]
+                    f8[:] = f_keep
                 else:
                     # cheaper than copying: freeze them (t = inf keeps them done, never
                     # recorded again; they drift harmlessly, their cell index clipped)
-                    np.copyto(t, np.inf, where=done)
+                    np.putmask(t, done, np.inf)
+            np.multiply(f8, f32(0.25), out=f)  # the clearance jump, in cells
             # the DDA step: to just past the nearest cell boundary ahead
             fu += 1.0
             fu -= u
@@ -540,18 +585,23 @@ class RayCaster:
             t += fu
         else:  # pragma: no cover - safety net, not reached on real maps
             fallback = ray
-        # ranges of the hits: where the ray enters the hit cell (slab test, float64)
+        # ranges of the hits: where the ray enters the hit cell, the later of its entries
+        # into the cell's column and row (slab test, float64, in mirrored coordinates)
         result = np.full(m, self.max_range)
         h = np.flatnonzero(hit_k >= 0)
         if h.size:
+            pose = h // b
             ci, cj = np.divmod(hit_k[h], wp)
-            ddx, ddy = dx[h], dy[h]
-            sx0 = np.repeat(x0, b)[h]
-            sy0 = np.repeat(y0, b)[h]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                tx = np.where(np.abs(ddx) > 1e-12, (cj + (ddx < 0) - sx0) / ddx, -np.inf)
-                ty = np.where(np.abs(ddy) > 1e-12, (ci + (ddy < 0) - sy0) / ddy, -np.inf)
-            result[h] = np.minimum(np.maximum(np.maximum(tx, ty), 0.0) * res, self.max_range)
+            nx, ny = neg_x[h], neg_y[h]
+            # the cell's lower corner in the ray's mirrored coordinates (u = -x: -(j + 1))
+            tu = np.where(nx, -1.0 - cj + x0[pose], cj - x0[pose])
+            tu /= np.maximum(np.abs(dx[h]), 1e-6)
+            tv = np.where(ny, -1.0 - ci + y0[pose], ci - y0[pose])
+            tv /= np.maximum(np.abs(dy[h]), 1e-6)
+            np.maximum(tu, tv, out=tu)
+            np.maximum(tu, 0.0, out=tu)
+            tu *= res
+            result[h] = np.minimum(tu, self.max_range)
         for q in fallback:  # pragma: no cover
             pi, bi = divmod(int(q), b)
             pose = p[rows_in[pi]]
@@ -725,17 +775,23 @@ class CompactTable:
         return int(self.codes.nbytes + self.row_of_cell.nbytes)
 
 
+_BUILD_CELL_BINS = 9e7  # cells x bins of the largest compact table built by default: about a second
+
+
 def compact_bins(grid: OccupancyGrid, table_mb: float = 90.0) -> int:
     """Heading bins of the compact table that fit ``table_mb`` megabytes: even, at most 360.
 
     One byte per bin for every cell that is not an obstacle, plus a 4-byte
-    row index per cell.
+    row index per cell. The build sweeps every cell once per bin, so the
+    bins are also capped at ``9e7 / (H * W)`` (140 for 800 x 800 cells),
+    which keeps the build near a second (pass ``n_bins`` to the caster
+    for more).
 
     Examples
     --------
     >>> from localize.maps import benchmark_map
-    >>> compact_bins(benchmark_map(800, 0.1))   # 609,000 open cells
-    142
+    >>> compact_bins(benchmark_map(800, 0.1))   # 609,000 open cells, 86 MB
+    140
     """
     grid = _check_grid(grid)
     n_rows = int((~grid.obstacles).sum()) + 1
@@ -745,7 +801,8 @@ def compact_bins(grid: OccupancyGrid, table_mb: float = 90.0) -> int:
         raise ValueError(f"a compact table of this {grid.shape[0]} x {grid.shape[1]} map needs at least "
                          f"{(4 * n_rows + 4 * grid.obstacles.size) / 1e6:.0f} MB for 4 heading bins; "
                          f"table_mb is {table_mb:g}. Raise table_mb or use method='march'.")
-    return min(nb, 360)
+    cap = int(_BUILD_CELL_BINS // grid.obstacles.size) // 2 * 2
+    return max(4, min(nb, 360, cap))
 
 
 def build_compact_table(grid: OccupancyGrid, max_range: float, n_bins: int = 144,
@@ -756,7 +813,7 @@ def build_compact_table(grid: OccupancyGrid, max_range: float, n_bins: int = 144
     from cell centres at bin headings), stored more tightly: one row per
     cell that is not an obstacle and one byte per heading, the range rounded
     to the nearest multiple of ``max_range / 255``. For an 800 x 800 map
-    with 95% open cells and 142 bins: 86 MB plus a 2.6 MB row index, built
+    with 95% open cells and 140 bins: 85 MB plus a 2.6 MB row index, built
     in about a second (``benchmarks/bench_raycast.py``).
 
     Examples

@@ -221,9 +221,10 @@ class BeamModel:
         Use only this many evenly spaced beams of each scan (None: all).
     temper : float
         Multiply the scan log-likelihood by this factor in ``(0, 1]``.
-    method, n_bins : str, int
+    method, n_bins : str, int or None
         Ray casting method and lookup-table bins (see
-        :class:`localize.raycast.RayCaster`).
+        :class:`localize.raycast.RayCaster`; ``None``: its default for the
+        method, 360 for ``"lut"``, what fits the memory budget for ``"compact"``).
     caster : RayCaster, optional
         Share a caster (and its table) between models.
 
@@ -237,7 +238,7 @@ class BeamModel:
     def __init__(self, grid: OccupancyGrid | None, max_range: float, z_hit: float = 0.8, z_short: float = 0.1,
                  z_max: float = 0.05, z_rand: float = 0.05, sigma_hit: float = 0.2, lambda_short: float = 0.5,
                  *, sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
-                 temper: float = 1.0, method: str = "lut", n_bins: int = 360,
+                 temper: float = 1.0, method: str = "lut", n_bins: int | None = None,
                  caster: RayCaster | None = None) -> None:
         self.grid = None if grid is None else _check_grid(grid)
         self.max_range = _check_max_range(max_range)

@@ -407,3 +407,16 @@ def test_beam_model_scores_coded_ranges_like_decoded_ones(random_case):
         top.append(fast[0] >= np.quantile(fast, 0.9))
     assert np.mean(corr) >= 0.9 and min(corr) >= 0.8
     assert sum(top) >= 4
+
+
+def test_march_exact_in_open_space_beyond_the_byte_clearance():
+    """Clearances above 63 cells are capped in the marcher's byte field: long jumps stay exact."""
+    data = np.zeros((300, 320))
+    data[150:153, 40:60] = 1.0
+    data[20:25, 280:284] = 1.0
+    g = OccupancyGrid(data, 0.05)
+    rng = np.random.default_rng(11)
+    poses = g.sample_free(60, rng)
+    angles = rng.uniform(-np.pi, np.pi, 16)
+    np.testing.assert_allclose(cast(g, poses, angles, 25.0, "march"), cast(g, poses, angles, 25.0, "exact"),
+                               atol=1e-4)
