@@ -860,7 +860,10 @@ def build_compact_table(grid: OccupancyGrid, max_range: float, n_bins: int = 144
             v *= to_code
             v += np.float32(0.5)
             by_bin[kk, 1:] = v.astype(np.uint8)
-    return CompactTable(np.ascontiguousarray(by_bin.T), row_of_cell, n_bins, max_range)
+    codes = np.empty((open_i.size + 1, n_bins), dtype=np.uint8)
+    for c0 in range(0, codes.shape[0], 16384):  # transpose in tiles that stay in cache
+        codes[c0:c0 + 16384] = by_bin[:, c0:c0 + 16384].T
+    return CompactTable(codes, row_of_cell, n_bins, max_range)
 
 
 def coded_sum(codes: NDArray[np.uint8], per_code: NDArray) -> NDArray[np.float64]:
@@ -954,33 +957,39 @@ class _Sweep:
             exit_b = exit_b.astype(f32)
             a1 = P + r1 + umin
             a2 = P + r2 + umin
+            # Python scalars for the per-column loops (numpy scalar indexing is slow)
+            a1l, a2l, xcl = a1.tolist(), a2.tolist(), xc.tolist()
+            ol = (base - umin).tolist()
+            mine, crossing = cols_q.tolist(), (r1 != r2).tolist()
             # forward sweep, right to left: cur = nearest obstacle entry ahead on each line
             cur = np.full(nu, inf, f32)
             for j in range(W - 1, -1, -1):
-                seg1 = pad[j, a1[j]:a1[j] + nu]
-                seg2 = pad[j, a2[j]:a2[j] + nu]
-                if cols_q[j]:
-                    o = base[j] - umin
-                    out = np.copy(cur[o:o + H])
-                    if xc[j] > j:  # the cell's centre is in r1; r2 lies ahead in the same column
+                seg1 = pad[j, a1l[j]:a1l[j] + nu]
+                seg2 = pad[j, a2l[j]:a2l[j] + nu]
+                if mine[j]:
+                    o = ol[j]
+                    out = fwd[j]
+                    out[:] = cur[o:o + H]
+                    if crossing[j] and xcl[j] > j:  # the centre is in r1; r2 lies ahead in the column
                         np.minimum(out, xc[j], out=out, where=seg2[o:o + H])
                     out[out >= exit_f[o:o + H]] = inf
-                    fwd[j] = out
-                np.minimum(cur, xc[j], out=cur, where=seg2)
+                if crossing[j]:  # otherwise seg2 is seg1, overwritten just below
+                    np.minimum(cur, xc[j], out=cur, where=seg2)
                 cur[seg1] = j - 0.5
             # backward sweep, left to right: cur = nearest obstacle entry behind
             cur = np.full(nu, -inf, f32)
             for j in range(W):
-                seg1 = pad[j, a1[j]:a1[j] + nu]
-                seg2 = pad[j, a2[j]:a2[j] + nu]
-                if cols_q[j]:
-                    o = base[j] - umin
-                    out = np.copy(cur[o:o + H])
-                    if xc[j] < j:  # the cell's centre is in r2; r1 lies behind in the same column
+                seg1 = pad[j, a1l[j]:a1l[j] + nu]
+                seg2 = pad[j, a2l[j]:a2l[j] + nu]
+                if mine[j]:
+                    o = ol[j]
+                    out = bwd[j]
+                    out[:] = cur[o:o + H]
+                    if crossing[j] and xcl[j] < j:  # the centre is in r2; r1 lies behind in the column
                         np.maximum(out, xc[j], out=out, where=seg1[o:o + H])
                     out[out <= exit_b[o:o + H]] = -inf
-                    bwd[j] = out
-                np.maximum(cur, xc[j], out=cur, where=seg1)
+                if crossing[j]:
+                    np.maximum(cur, xc[j], out=cur, where=seg1)
                 cur[seg2] = j + 0.5
         jc = jj.astype(f32)[:, None]
         step = f32(res * math.sqrt(1.0 + s * s))
