@@ -366,8 +366,7 @@ class RayCaster:
         if self.method == "march":
             out = self._march(p, a, inside)
         elif self.method == "compact":
-            codes = self._compact_codes(p, a, inside)
-            out = np.multiply(codes, np.float32(self.compact_table.step), dtype=np.float32)
+            out = self.compact_table.levels.take(self._compact_codes(p, a, inside))
         else:
             out = self._lut_cast(p, a, inside)
         return out.astype(dtype, copy=False)
@@ -767,7 +766,9 @@ class CompactTable:
     @property
     def levels(self) -> NDArray[np.float32]:
         """The range of every code, ``(256,)`` float32 (codes above 255 do not occur)."""
-        return np.arange(256, dtype=np.float32) * np.float32(self.step)
+        levels = (np.arange(256) * self.step).astype(np.float32)
+        levels[255] = self.max_range  # exactly, not a rounding above it
+        return levels
 
     @property
     def nbytes(self) -> int:
@@ -1007,7 +1008,7 @@ class _Sweep:
 
 # ------------------------------------------------------------ the function
 def cast(grid: OccupancyGrid, poses: ArrayLike, angles: ArrayLike, max_range: float,
-         method: str = "exact", outside: str = "zero", n_bins: int = 360) -> NDArray[np.float64]:
+         method: str = "exact", outside: str = "zero", n_bins: int | None = None) -> NDArray[np.float64]:
     """Expected ranges ``(N, B)`` from sensor poses ``(N, 3)`` along beam angles ``(B,)``.
 
     A convenience wrapper that builds a :class:`RayCaster` for one call. In a
@@ -1023,12 +1024,13 @@ def cast(grid: OccupancyGrid, poses: ArrayLike, angles: ArrayLike, max_range: fl
         Beam angles relative to each pose's heading (radians).
     max_range : float
         Longest range the sensor reports (metres).
-    method : {"exact", "march", "lut"}
+    method : {"exact", "march", "lut", "compact"}
         See the module docstring. The default is the readable oracle.
     outside : {"zero", "raise"}
         Outcome for sensor poses outside the map.
-    n_bins : int
-        Heading bins for ``method="lut"``.
+    n_bins : int or None
+        Heading bins for ``method="lut"`` (default 360) or ``"compact"``
+        (default: what fits 90 MB, see :func:`compact_bins`).
 
     Returns
     -------

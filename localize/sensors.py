@@ -450,7 +450,7 @@ class BeamModel:
             # expected ranges as 8-bit codes: score each beam at the 256 code levels once,
             # then one lookup per beam (same values as beam_log_pdf at the decoded ranges)
             codes, levels = self.caster.cast_codes(sensor_poses(poses, self.sensor_offset), a)
-            per_level = self.beam_log_pdf(z, np.broadcast_to(levels[:, None], (levels.size, z.size)))
+            per_level = self.beam_log_pdf(z, np.repeat(levels[:, None], z.size, axis=1))
             ll = coded_sum(codes, np.ascontiguousarray(per_level.T, dtype=np.float32))
         else:
             zs = self.expected(poses, a, dtype=np.float32)
