@@ -584,23 +584,24 @@ class RayCaster:
             t += fu
         else:  # pragma: no cover - safety net, not reached on real maps
             fallback = ray
-        # ranges of the hits: where the ray enters the hit cell, the later of its entries
-        # into the cell's column and row (slab test, float64, in mirrored coordinates)
-        result = np.full(m, self.max_range)
-        h = np.flatnonzero(hit_k >= 0)
-        if h.size:
-            pose = h // b
-            ci, cj = np.divmod(hit_k[h], wp)
-            nx, ny = neg_x[h], neg_y[h]
-            # the cell's lower corner in the ray's mirrored coordinates (u = -x: -(j + 1))
-            tu = np.where(nx, -1.0 - cj + x0[pose], cj - x0[pose])
-            tu /= np.maximum(np.abs(dx[h]), 1e-6)
-            tv = np.where(ny, -1.0 - ci + y0[pose], ci - y0[pose])
-            tv /= np.maximum(np.abs(dy[h]), 1e-6)
-            np.maximum(tu, tv, out=tu)
-            np.maximum(tu, 0.0, out=tu)
-            tu *= res
-            result[h] = np.minimum(tu, self.max_range)
+        # ranges of the hits: where the ray enters the hit cell, the later of its entries into
+        # the cell's column and row (slab test, float64). The beams of a pose are contiguous,
+        # so each pose's start point broadcasts over its beams.
+        shape = (rows_in.size, b)
+        kk = hit_k.reshape(shape).astype(np.float64)
+        ci = np.floor(kk / wp)
+        cj = kk - ci * wp
+        tu = cj + neg_x.reshape(shape)
+        tu -= x0[:, None]
+        tu /= np.where(dx == 0.0, np.inf, dx).reshape(shape)  # 0 / inf: no crossing of columns
+        tv = ci + neg_y.reshape(shape)
+        tv -= y0[:, None]
+        tv /= np.where(dy == 0.0, np.inf, dy).reshape(shape)
+        np.maximum(tu, tv, out=tu)
+        np.maximum(tu, 0.0, out=tu)
+        tu *= res
+        np.minimum(tu, self.max_range, out=tu)
+        result = np.where(kk >= 0, tu, self.max_range).ravel()
         for q in fallback:  # pragma: no cover
             pi, bi = divmod(int(q), b)
             pose = p[rows_in[pi]]
