@@ -649,7 +649,11 @@ class RayCaster:
         i, j = _cell_of(self.grid, p)
         cell = np.where(inside, np.clip(i, 0, rows - 1) * cols + np.clip(j, 0, cols - 1), 0)
         row = np.where(inside, ct.row_of_cell.take(cell), 0)  # row 0: all zeros
-        return ct.codes.ravel().take(_table_index(row, p[:, 2], a, self.n_bins, ct.codes.size))
+        # copy each pose's row first (one short memcpy per pose from the big table), then pick
+        # the beams' bins from the copies, which stay in cache: several times faster than
+        # picking single bytes from all over the table
+        mine = ct.codes.take(row, axis=0)
+        return mine.ravel().take(_table_index(np.arange(row.size), p[:, 2], a, self.n_bins, mine.size))
 
 
 def _cell_of(grid: OccupancyGrid, p: NDArray) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
