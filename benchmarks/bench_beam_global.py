@@ -94,8 +94,8 @@ def main(argv: list[str] | None = None) -> int:
         ok = "yes" if rtf_cpu >= 5.0 else "NO"
         print(f"| {name} | {s['scans_with_update']} | {s['seconds_reading_files']:.2f} | {s['wall_s']:.1f} "
               f"| {s['cpu_s']:.1f} | {rtf:.1f}x | {rtf_cpu:.1f}x | {conv} | {err:.2f} | 5x | {ok} |")
-    print("\nEach row is one run of the whole command (the table build included). The command is single-threaded, "
-          "so its CPU time is what one dedicated core needs; on a shared machine the wall time also counts the "
+    print("\nEach row is one run of the whole command (the table build included). Pinned to one core (taskset), "
+          "its CPU time is what one dedicated core needs; on a shared machine the wall time also counts the "
           "time other jobs held the core (equal to the CPU time on an idle one). The final error is large because "
           "the filter settles in the wrong room of this symmetric building: the 360-bin 16-bit table and the "
           "likelihood field do the same with these settings (a filter question, not a ray-casting one).")
