@@ -300,7 +300,10 @@ class RayCaster:
     with a 30 m range and its default 140 bins, 96.5% of the rays are
     within the bound (the 360-bin 16-bit table: 97.6% within its own);
     the median error is 5 cm, the 90th percentile 20 cm
-    (``benchmarks/bench_raycast.py`` measures it).
+    (``benchmarks/bench_raycast.py`` measures it). On a real map, the
+    Willow Garage office (10 cm, thin walls and clutter), 93% are within the
+    bound at the default 260 bins (tested >= 90%; the 16-bit 360-bin table:
+    92% within its own).
 
     Examples
     --------
