@@ -827,6 +827,20 @@ def build_compact_table(grid: OccupancyGrid, max_range: float, n_bins: int = 144
     with 95% open cells and 140 bins: 85 MB plus a 2.6 MB row index, built
     in about a second (``benchmarks/bench_raycast.py``).
 
+    Notes
+    -----
+    Why this design (measured on that map, 30 m range, 45,000 rays against
+    the exact caster): with memory fixed, the number of heading bins
+    decides the tail of the error, and 8-bit codes cost little (median
+    error 4.4 cm instead of 4.0 cm at 144 bins; the 95th percentile 0.33 m
+    either way). Fewer bins with linear interpolation between them look
+    better in the median (1.1 cm) but worse in the tail, where two bins hit
+    different obstacles and the blend matches neither (95th percentile
+    0.91 m at 144 bins, 2.8 m at 72). A compressed directional distance
+    transform (range_libc's CDDT) needs far less memory, but its query is a
+    search along the line; in numpy that is several dependent gathers per
+    ray instead of one, too slow for the 100 M beams/s target.
+
     Examples
     --------
     >>> from localize import OccupancyGrid
