@@ -41,18 +41,19 @@ def best_wall_cpu(fn: Callable[[], object], repeats: int = 5) -> tuple[float, fl
     return min(walls), min(cpus)
 
 
-def scan_scene(n_poses: int = 10_000, n_beams: int = 60, seed: int = 0):
+def scan_scene(n_poses: int = 10_000, n_beams: int = 60, seed: int = 0, resolution: float = 0.05):
     """The scene of the ray-casting and sensor speed targets.
 
-    Returns ``(grid, poses, angles, rng)``: ``benchmark_map(800)``, ``n_poses``
-    poses drawn uniformly over its free space, ``n_beams`` beam angles over
-    180 degrees, and the generator (to draw more from the same stream).
+    Returns ``(grid, poses, angles, rng)``: ``benchmark_map(800, resolution)``
+    (5 cm cells: 40 m x 40 m; 10 cm: the Wean Hall map's 80 m x 80 m),
+    ``n_poses`` poses drawn uniformly over its free space, ``n_beams`` beam
+    angles over 180 degrees, and the generator (to draw more from the same stream).
     """
     import numpy as np
 
     from localize.maps import benchmark_map
 
-    grid = benchmark_map(800)
+    grid = benchmark_map(800, resolution)
     rng = np.random.default_rng(seed)
     poses = grid.sample_free(n_poses, rng)
     angles = np.linspace(-np.pi / 2, np.pi / 2, n_beams)

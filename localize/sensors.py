@@ -43,7 +43,7 @@ from scipy.special import ndtr, ndtri
 
 from .geometry import as_poses, wrap_angle
 from .grid import OccupancyGrid
-from .raycast import RayCaster, _check_angles, _check_grid, _check_max_range
+from .raycast import RayCaster, _check_angles, _check_grid, _check_max_range, coded_sum
 
 __all__ = ["BeamModel", "LikelihoodField", "LandmarkModel", "check_ranges", "sensor_poses", "select_beams"]
 
@@ -221,9 +221,10 @@ class BeamModel:
         Use only this many evenly spaced beams of each scan (None: all).
     temper : float
         Multiply the scan log-likelihood by this factor in ``(0, 1]``.
-    method, n_bins : str, int
+    method, n_bins : str, int or None
         Ray casting method and lookup-table bins (see
-        :class:`localize.raycast.RayCaster`).
+        :class:`localize.raycast.RayCaster`; ``None``: its default for the
+        method, 360 for ``"lut"``, what fits the memory budget for ``"compact"``).
     caster : RayCaster, optional
         Share a caster (and its table) between models.
 
@@ -237,7 +238,7 @@ class BeamModel:
     def __init__(self, grid: OccupancyGrid | None, max_range: float, z_hit: float = 0.8, z_short: float = 0.1,
                  z_max: float = 0.05, z_rand: float = 0.05, sigma_hit: float = 0.2, lambda_short: float = 0.5,
                  *, sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
-                 temper: float = 1.0, method: str = "lut", n_bins: int = 360,
+                 temper: float = 1.0, method: str = "lut", n_bins: int | None = None,
                  caster: RayCaster | None = None) -> None:
         self.grid = None if grid is None else _check_grid(grid)
         self.max_range = _check_max_range(max_range)
@@ -445,8 +446,15 @@ class BeamModel:
         True
         """
         z, a = self._prepare(ranges, angles)
-        zs = self.expected(poses, a, dtype=np.float32)
-        ll = self.beam_log_pdf(z, zs).sum(axis=1, dtype=np.float64)
+        if self.caster is not None and self.caster.coded:
+            # expected ranges as 8-bit codes: score each beam at the 256 code levels once,
+            # then one lookup per beam (same values as beam_log_pdf at the decoded ranges)
+            codes, levels = self.caster.cast_codes(sensor_poses(poses, self.sensor_offset), a)
+            per_level = self.beam_log_pdf(z, np.repeat(levels[:, None], z.size, axis=1))
+            ll = coded_sum(codes, np.ascontiguousarray(per_level.T, dtype=np.float32))
+        else:
+            zs = self.expected(poses, a, dtype=np.float32)
+            ll = self.beam_log_pdf(z, zs).sum(axis=1, dtype=np.float64)
         return ll * self.temper if self.temper != 1.0 else ll
 
     def sample_expected(self, expected: ArrayLike, rng: np.random.Generator) -> NDArray[np.float64]:
