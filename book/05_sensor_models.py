@@ -266,8 +266,11 @@ plt.show()
 # * **rand**: a random reading, uniform $1/z_\text{max}$ on $[0, z_\text{max})$.
 #
 # $$p(z \mid z^*) = z_\text{hit}\,p_\text{hit} + z_\text{short}\,p_\text{short}
-#  + z_\text{max}\,p_\text{max} + z_\text{rand}\,p_\text{rand},\qquad
-#  z_\text{hit} + z_\text{short} + z_\text{max} + z_\text{rand} = 1.$$
+#  + z_\text{max}\,p_\text{max} + z_\text{rand}\,p_\text{rand},$$
+#
+# with weights that sum to one,
+#
+# $$z_\text{hit} + z_\text{short} + z_\text{max} + z_\text{rand} = 1.$$
 #
 # (One of the seed reports writes the exponential with a scale instead of a
 # rate, $\frac{1}{\lambda}e^{-z/\lambda}$, and without its normaliser; PR and
@@ -315,6 +318,7 @@ ax.set_xlabel("z [m]")
 ax.legend()
 plt.show()
 print(f"fraction of max-range readings: {np.mean(draws == MAX_RANGE):.4f} (z_max = {beam.z_max})")
+assert abs(np.mean(draws == MAX_RANGE) - beam.z_max) < 5 * np.sqrt(beam.z_max * (1 - beam.z_max) / draws.size)
 
 # %% [markdown]
 # ## Expected versus measured scans
@@ -368,6 +372,7 @@ for c, lp, s in zip(cands, log_product, beam_sum):
     print(f"y = {c[1]:.1f}: log of the product {lp:8.1f}   sum of densities {s:6.2f}")
 print(f"true pose versus 10 cm off: product ratio exp({log_product[0] - log_product[1]:.1f}), "
       f"sum ratio {beam_sum[0] / beam_sum[1]:.2f}")
+assert log_product[0] - log_product[1] > 20 and beam_sum[0] / beam_sum[1] < 2   # the sum separates weakly
 
 # %% [markdown]
 # One of the seed reports scored a particle by *summing* the per-beam
@@ -395,6 +400,8 @@ for name, model in [("plain Gaussian", gauss), ("mixture", beam)]:
     ll = model.log_likelihood(two, measured, angles)
     winner = "true pose" if ll[0] > ll[1] else "WRONG pose"
     print(f"{name:15s}: log-likelihood true {ll[0]:12.1f}, 30 cm off {ll[1]:12.1f} -> {winner} wins")
+    assert (ll[0] > ll[1]) == (name == "mixture")
+assert np.isclose(0.5 * (3 / 0.15) ** 2, 200)      # the cost of one beam 3 m short, below
 
 # %% [markdown]
 # Under the Gaussian a beam that reads 3 m short costs $\frac12(3/0.15)^2 =
@@ -431,6 +438,7 @@ for label, kwargs in [("all 61 beams", {}), ("max_beams = 12", {"max_beams": 12}
 print(f"{len(cloud)} particles around the true pose")
 for label, e in rows:
     print(f"  {label:28s} ESS = {e:7.1f}")
+assert all(e > 2 * rows[0][1] for _, e in rows[1:])    # both remedies widen the posterior
 
 # %% [markdown]
 # Two standard remedies, both options of every range model here:
@@ -482,13 +490,30 @@ plt.show()
 # %%
 offsets = np.array([[0, 0, 0], [0.2, 0, 0], [-0.2, 0, 0], [0, 0.2, 0], [0, -0.2, 0], [0, 0, 0.1], [0, 0, -0.1]])
 cands = true_pose + offsets
+drop = {}
 for name, model in [("beam model", beam), ("likelihood field", lf)]:
     ll = model.log_likelihood(cands, measured, angles)
-    print(f"{name:17s} log-likelihood minus the true pose's:", (ll - ll[0]).round(1))
+    drop[name] = ll - ll[0]
+    print(f"{name:17s} log-likelihood minus the true pose's:", drop[name].round(1))
+b_, f_ = drop["beam model"], drop["likelihood field"]
+assert np.all(b_[3:] < -25) and np.all(f_[[4, 5, 6]] < -10)   # sharp across (beam model) and in heading
+assert -5 < f_[3] < 0                                          # ... but the field hardly notices +20 cm in y
+assert np.all(np.abs(b_[1:3]) < 5) and np.all(np.abs(f_[1:3]) < 5) and f_[1] > 0   # along: hardly at all
 
 # %% [markdown]
-# Across the corridor and in heading both models are sharp. *Along* the
-# corridor they hardly care: most beams end on the two long walls, which
+# In heading both models are sharp, and the beam model is sharp across the
+# corridor in both directions. The likelihood field is sharp for the shift
+# towards the lower wall ($-y$) but hardly notices the same shift towards the
+# upper one (a drop of only about 3 nats): it scores each end point by its
+# distance to the nearest obstacle in *any* direction, so end points pushed
+# into a wall still sit on an obstacle and score fully; each end point that
+# now falls short of the other wall loses at most a bounded amount (the
+# uniform floor caps the loss per beam at under 2 nats, where the beam model,
+# which follows the ray, loses up to about 6); and in this scan about as many end
+# points that sat slightly off the walls at the true pose land on them after
+# the shift. Which direction comes off lightly depends on the scan and on the
+# walls' thickness; the lesson is that the field's verdict across a corridor
+# is weaker than it looks. *Along* the corridor both models hardly care: most beams end on the two long walls, which
 # look the same 20 cm further on, and only the few beams that reach a door,
 # the pillar or the far end carry that information (the corridor version of
 # the aperture problem). The likelihood field even prefers the pose 20 cm
@@ -734,22 +759,31 @@ def mean_ess(model, temper=1.0):
     return float(np.mean([ess(temper * model.log_likelihood(cloud, z, angles)) for z in scans]))
 
 
+ess_k = {}
 for k in (5, 10, 20, 61):
     m = BeamModel(grid, MAX_RANGE, **beam.params, caster=beam.caster, max_beams=k)
-    print(f"max_beams = {k:2d}: mean ESS = {mean_ess(m):7.1f}")
+    ess_k[k] = mean_ess(m)
+    print(f"max_beams = {k:2d}: mean ESS = {ess_k[k]:7.1f}")
 target = mean_ess(BeamModel(grid, MAX_RANGE, **beam.params, caster=beam.caster, max_beams=10))
 temps = np.geomspace(0.02, 1, 40)
 ess_t = np.array([mean_ess(beam, g) for g in temps])
 best = temps[np.argmin(np.abs(np.log(ess_t) - np.log(target)))]
 print(f"61 beams tempered by {best:.3f} give mean ESS {mean_ess(beam, best):.1f}, like 10 beams ({target:.1f})")
 print(f"61 beams x {best:.3f} = {61 * best:.1f} 'independent' beams")
+assert ess_k[5] > ess_k[20] > ess_k[10] > ess_k[61]          # higher with fewer beams, but not monotonic
+from localize.sensors import select_beams  # noqa: E402
+
+assert not set(select_beams(61, 10)) <= set(select_beams(61, 20))   # the 10 are not a subset of the 20
 
 # %% [markdown] tags=["solution"]
 # ````{admonition} Solution
 # :class: dropdown, tip
 #
-# The ESS grows as beams are dropped, and tempering the full scan by a factor $\gamma$ has a
-# similar effect. The $\gamma$ that matches 10 beams need not be $10/61$: the ESS of one cloud
+# Dropping beams raises the ESS overall (5 beams against all 61), but not
+# monotonically: here 20 beams give a *larger* mean ESS than 10. The 10 evenly spaced beams are
+# not a subset of the 20, and a handful of beams that happen to hit a person or a door edge
+# decides how peaked the weights are; with so few beams, which ones are kept matters as much as
+# how many. Tempering the full scan by a factor $\gamma$ widens the weights smoothly instead. The $\gamma$ that matches 10 beams need not be $10/61$: the ESS of one cloud
 # depends on *which* beams are kept (10 beams spread over the field of view keep most of the
 # geometry, while a random tenth of the log-likelihood would not), and on the outliers in each
 # scan, which is why we average over several scans. The product $61\gamma$ says how many
