@@ -62,7 +62,13 @@ from localize.plot import draw_map, draw_robot
 from localize.plot.sensors import plot_beam_pdf, plot_likelihood_field, plot_ranges, plot_scan_on_map
 from localize.raycast import RayCaster, cast, cast_ray
 from localize.sensors import BeamModel, LandmarkModel, LikelihoodField, select_beams
-from localize.widgets.sensors import beam_density_widget, pose_scan_figure, pose_scan_widget, pseudo_density_figure
+from localize.widgets.sensors import (
+    beam_density_widget,
+    pose_scan_figure,
+    pose_scan_start,
+    pose_scan_widget,
+    pseudo_density_figure,
+)
 
 rng = np.random.default_rng(5)
 grid = maps.office()
@@ -613,7 +619,8 @@ for k in truth:
 pose_scan_widget(grid, beam, angles, measured, start=true_pose + [0.4, 0.2, 0.0], reference_pose=true_pose)
 
 # %%
-fig = pose_scan_figure(grid, beam, angles, measured, *(true_pose[:2] + [0.4, 0.2]), np.degrees(true_pose[2]),
+# the widget's starting position: x and y on cell centres, the heading on the slider's 2-degree steps
+fig = pose_scan_figure(grid, beam, angles, measured, *pose_scan_start(grid, true_pose + [0.4, 0.2, 0.0]),
                        reference_pose=true_pose)
 plt.show()
 

@@ -187,3 +187,11 @@ def test_scenario_3_mcl_succeeds_in_90_percent_of_seeds_and_ekf_mostly_fails():
     mc = C.monte_carlo(C.scenario("global", n_steps=30), range(S), filters=("EKF", "MCL"))
     assert mc.metrics["MCL"].failure_rate <= 0.10, mc.metrics["MCL"].failed
     assert mc.metrics["EKF"].failure_rate >= 0.5
+
+
+def test_monte_carlo_with_a_progress_bar_gives_the_same_metrics(capsys):
+    sc = C.scenario("tracking", n_steps=10, n_particles=100)
+    quiet = C.monte_carlo(sc, range(2), filters=("EKF",))
+    shown = C.monte_carlo(sc, range(2), filters=("EKF",), progress=True)
+    assert np.array_equal(quiet.metrics["EKF"].pos_err, shown.metrics["EKF"].pos_err)
+    assert "scenario tracking" in capsys.readouterr().err

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 import numpy as np
+from matplotlib.ticker import FuncFormatter
 from numpy.typing import ArrayLike
 
 from ..geometry import as_poses
@@ -223,6 +224,8 @@ def plot_errors(estimates: ArrayLike, truth: ArrayLike, ax=None, label: str | No
     >>> ax = plot_errors(e, t, kidnap_steps=[2])
     >>> ax.get_ylabel()
     'position error [m]'
+    >>> [t.get_text() for t in ax.get_yticklabels()]     # no negative ticks on an error axis
+    ['0', '0.1', '1']
     >>> plt.close("all")
     """
     _, ax = new_axes(ax, figsize=(7, 3))
@@ -238,7 +241,15 @@ def plot_errors(estimates: ArrayLike, truth: ArrayLike, ax=None, label: str | No
         ax.axvline(k, color="k", ls=":", lw=1)
     ax.set_xlabel("step")
     ax.set_ylabel("position error [m]")
+    # errors are >= 0: linear from 0 to 0.1 m, logarithmic above; no negative ticks, plain numbers
     ax.set_yscale("symlog", linthresh=0.1)
+    top = max(1.0, float(np.nanmax(pe)) * 1.5) if pe.size and np.isfinite(pe).any() else 1.0
+    if len(ax.lines) > 1 + len(kidnap_steps):          # more errors drawn on these axes before: keep them in view
+        top = max(top, ax.get_ylim()[1])
+    ax.set_ylim(0.0, top)
+    ticks = [0.0] + [10.0**k for k in range(-1, int(np.floor(np.log10(top))) + 1)]
+    ax.set_yticks(ticks)
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.grid(True, alpha=0.3)
     return ax
 
