@@ -347,6 +347,27 @@ for (factor, n_head), (build, per_step) in zip(configs, timings):
 # particle filters attractive: they put their samples only where the belief is.
 
 # %% [markdown]
+# ## Try it: cell size and heading bins
+#
+# The widget reruns the filter on this chapter's data with the cell size and
+# number of heading bins you pick (the heading bins must divide the 30° beam
+# spacing, hence 12, 24, 36 or 72). Watch two things: how the error along the
+# path follows the cell size — and where a coarse grid mistakes a
+# neighbouring cell for the right one — and how few heading bins make the
+# estimate's heading, and with it the motion update, coarse. The title gives
+# the number of bins, the work of every update. (In the HTML book the figure
+# below shows the default, this chapter's 20 cm and 36 headings.)
+
+# %% tags=["nbval-ignore-output"]
+from localize.widgets.gridloc import grid_resolution_figure, grid_resolution_widget  # noqa: E402
+
+grid_resolution_widget()
+
+# %%
+fig = grid_resolution_figure(0.2, 36)
+fig
+
+# %% [markdown]
 # ## Summary
 #
 # * The pose grid holds one probability per (heading bin, cell): $K \cdot H \cdot W$ numbers.

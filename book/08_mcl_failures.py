@@ -342,6 +342,30 @@ assert n_recovered["augmented MCL"] > n_recovered["5% injection"] >= n_recovered
 # behaves like global localization with the filter's particle count: with too
 # few particles it takes long, and a wrong look-alike place can win again.
 #
+# ### Try it: injection rate, `α_slow`, `α_fast` and the temperature
+#
+# The widget kidnaps a smaller filter (1000 particles, 36 steps, kidnapped at
+# step 12) and shows its error and the share of particles replaced at every
+# step. Things to try: make `α_fast` slower (0.2) and watch the bursts while
+# localized shrink — and the reaction to the kidnapping too; raise the
+# `temperature` (the `Augmented` option that averages the likelihood per beam
+# rather than per scan) to 36, the number of beams; switch augmented MCL off
+# and give a fixed injection of 0.05 instead; change the robot (seed) to see
+# how much a single run tells. An invalid setting (`α_slow ≥ α_fast`) is
+# reported instead of drawn. (In the HTML book the figure below the widget
+# shows the default setting.)
+
+# %% tags=["nbval-ignore-output"]
+from localize.widgets.recovery import kidnap_figure, kidnap_widget  # noqa: E402
+
+kidnap_widget()
+
+# %%
+fig = kidnap_figure()
+print(f"recovered {fig.summary['recovered']} steps after the kidnapping; "
+      f"injected while localized: {fig.summary['injected_localized']:.0%} of the particles per step")
+fig
+#
 # ## KLD-sampling: as many particles as needed
 #
 # Global localization needs thousands of particles; tracking a localized robot
