@@ -168,10 +168,22 @@ def snapshot_strip(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLike |
     return fig
 
 
+def _frame_title(step: int, drawn: int, n_particles: int | dict | None) -> str:
+    """'step 3: 2000 particles (1000 drawn)' when a subsample is drawn, else 'step 3: 2000 particles'."""
+    n = n_particles.get(step) if isinstance(n_particles, dict) else n_particles
+    if n is None or int(n) == drawn:
+        return f"step {step}: {drawn} particles"
+    return f"step {step}: {int(n)} particles ({drawn} drawn)"
+
+
 def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLike | None = None,
                       estimates: ArrayLike | None = None, interval: int = 250, figsize=(6.0, 3.8),
-                      size: float = 2.0, dpi: int = 72):
+                      size: float = 2.0, dpi: int = 72, n_particles: int | dict | None = None):
     """A matplotlib animation of the particle cloud, one frame per snapshot.
+
+    ``n_particles`` is the filter's particle count for the titles (an int, or
+    a dict step -> count) when the snapshots hold a subsample; by default the
+    title counts the particles drawn, and says "drawn" if fewer than stated.
 
     Embed it in a notebook with ``IPython.display.HTML(localize.plot.animation_html(anim))``;
     ``dpi`` sets the frames' resolution (and so the size of the embedded HTML).
@@ -186,6 +198,8 @@ def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLik
     >>> anim = animate_snapshots(office(), snaps, figsize=(3, 2))
     >>> "<script" in anim.to_jshtml(fps=4)
     True
+    >>> _frame_title(3, 1000, 2000), _frame_title(3, 50, None)
+    ('step 3: 2000 particles (1000 drawn)', 'step 3: 50 particles')
     >>> plt.close("all")
     """
     import matplotlib.pyplot as plt
@@ -203,7 +217,7 @@ def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLik
         k = steps[i]
         p, w = snapshots[k]
         draw_belief(grid, p, w, None if tp is None else tp[k], None if es is None else es[k], ax=ax,
-                    title=f"step {k}: {len(p)} particles", size=size)
+                    title=_frame_title(k, len(p), n_particles), size=size)
         return ax.get_children()
 
     anim = FuncAnimation(fig, frame, frames=len(steps), interval=interval, blit=False)
