@@ -252,6 +252,51 @@ plt.show()
 # `RayCaster(grid, max_range, method)` and call its `cast` at every step:
 # it keeps the field or the table.
 #
+# ### The simplest marcher, and its step size
+#
+# Many first implementations (the CMU homework reports among this book's
+# sources, for example) cast a ray by walking along it in **fixed steps**:
+# look up the cell under the point, stop at the first occupied one. Two errors
+# follow from the step $s$. The range comes out up to one step too long, since
+# the wall is noticed only at the first sample inside it; and a sample can land
+# *beyond* a wall thinner than a step — or cut the corner of an obstacle cell —
+# so the ray **slips through** and reads whatever lies behind. The first error
+# is bounded by $s$; the second is not bounded at all. A step no longer than
+# the cell size keeps both small but costs $r/s$ lookups per ray, which is what
+# the marcher above avoids. (A classic slip when writing the loop: adding the
+# distance travelled to itself instead of adding the step doubles the step each
+# time, so far ranges are sampled ever more coarsely.) On the random map above:
+
+# %%
+def fixed_step_cast(grid, poses, angles, max_range, step):
+    """Walk every ray in steps of ``step`` metres; first sample in an obstacle (or off the map) ends it."""
+    t = np.arange(step, max_range + step / 2, step)                       # sample distances
+    a = poses[:, 2:3] + angles[None, :]                                  # (P, B) beam directions
+    px = poses[:, 0, None, None] + t * np.cos(a)[..., None]               # (P, B, S)
+    py = poses[:, 1, None, None] + t * np.sin(a)[..., None]
+    j = np.floor((px - grid.origin[0]) / grid.resolution).astype(int)
+    i = np.floor((py - grid.origin[1]) / grid.resolution).astype(int)
+    inside = (i >= 0) & (i < grid.shape[0]) & (j >= 0) & (j < grid.shape[1])
+    blocked = ~inside | grid.obstacles[np.clip(i, 0, grid.shape[0] - 1), np.clip(j, 0, grid.shape[1] - 1)]
+    first = np.where(blocked.any(axis=-1), blocked.argmax(axis=-1), t.size - 1)
+    return np.minimum(t[first], max_range)
+
+
+print(" step [m] | lookups per ray | mean |error| | rays that slip through (error > 0.5 m)")
+slips = {}
+for s_step in (0.05, 0.1, 0.2, 0.4):
+    z_fixed = fixed_step_cast(rmap, r_poses, r_angles, 6.0, s_step)
+    err_fixed = np.abs(z_fixed - z_exact)
+    slips[s_step] = np.mean(err_fixed > 0.5)
+    print(f"  {s_step:5.2f}  | {6.0 / s_step:15.0f} | {100 * err_fixed.mean():9.1f} cm | {slips[s_step]:8.2%}")
+assert slips[0.05] < slips[0.2] < slips[0.4]
+
+# %% [markdown]
+# With steps of half a cell the error is a few centimetres and rays rarely
+# slip; at two and four cells a growing share of rays passes through thin walls
+# and corners — and those are the beams that ruin a particle's weight, since
+# they report a far wall where the map has a near one.
+#
 # ## The beam model
 #
 # A real scan is not the expected scan plus a little Gaussian noise. People
@@ -532,6 +577,67 @@ assert np.all(np.abs(b_[1:3]) < 5) and np.all(np.abs(f_[1:3]) < 5) and f_[1] > 0
 # The likelihood field is smoother in the pose and much faster; it ignores
 # what lies *along* the beam (it happily accepts an end point behind a wall),
 # which the beam model does not. The MCL chapter compares both on real data.
+#
+# ### What came before: occupancy lookup and hit counting
+#
+# Before ray casting, the CMU homework reports among our sources tried two
+# cheaper scores, and both lost. Each projects the beams' end points into the
+# map, as the likelihood field does, and then
+#
+# * **occupancy lookup** reads the (smoothed) occupancy probability at every
+#   end point and adds them up: a pose scores well if its end points land on
+#   walls;
+# * **hit counting** thresholds that probability and counts the end points
+#   that land on an obstacle cell.
+#
+# Both reward end points on walls and punish nothing else. A pose whose beams
+# pass *through* walls, or that stands inside a wall or outside the building,
+# is not penalised as long as its end points happen to touch some obstacle; and
+# neither score is a likelihood, so it cannot be multiplied into Bayes rule
+# (the sum has the weakness of the previous section). The likelihood field is
+# what these become when done properly — a density of the distance to the
+# nearest obstacle, with a floor for unexplained readings — and the beam model
+# adds what lies along the ray. Compare the three scores on the scan with the
+# two people, at the true pose, 20 cm across the corridor, and at a pose *inside
+# the corridor's wall* facing the same way:
+
+# %%
+from scipy import ndimage  # noqa: E402
+
+occ = np.nan_to_num(np.asarray(grid.data, dtype=float), nan=1.0)
+smooth = ndimage.gaussian_filter(occ, sigma=1.0)                       # a blurred map, as in the reports
+
+
+def endpoint_scores(pose):
+    ends = lf.endpoints(np.asarray(pose)[None], measured, angles)[0][measured < MAX_RANGE]
+    ij = np.array([grid.world_to_cell(e) if grid.contains(e) else (-1, -1) for e in ends])
+    ok = ij[:, 0] >= 0
+    o = np.zeros(len(ends))
+    o[ok] = smooth[ij[ok, 0], ij[ok, 1]]
+    return o.sum(), int(np.sum(o >= 0.5))
+
+
+wall_y = next(y for y in np.arange(true_pose[1], 0, -0.05) if grid.obstacles[tuple(grid.world_to_cell([true_pose[0], y]))])
+test_poses = {"true pose": true_pose, "20 cm across": true_pose + [0, 0.2, 0],
+              "inside the wall": np.array([true_pose[0], wall_y, true_pose[2]])}
+print(f"{'':16s} | occupancy sum | hits | beam log-likelihood")
+scores = {}
+for name, pose in test_poses.items():
+    occ_sum, hits = endpoint_scores(pose)
+    scores[name] = (occ_sum, hits, float(beam.log_likelihood(pose[None], measured, angles)[0]))
+    print(f"{name:16s} | {occ_sum:13.1f} | {hits:4d} | {scores[name][2]:10.1f}")
+assert scores["inside the wall"][2] < scores["true pose"][2] - 100                  # the beam model: impossible
+assert scores["inside the wall"][1] >= 0.2 * scores["true pose"][1]                # hit counting: still plausible
+assert scores["true pose"][1] > scores["20 cm across"][1] > scores["inside the wall"][1]
+
+# %% [markdown]
+# The end-point scores do rank the three poses in the right order, but they
+# leave the pose inside the wall far from impossible — a quarter or so of the
+# true pose's hits, in a score that counts hits, not probability — while the
+# beam model rules it out by nearly 200 nats, because from inside a wall every
+# beam is expected to read zero. This is the failure the
+# reports describe — particles drifting out of the free space — and the reason
+# they moved to ray casting.
 #
 # ## Landmarks: range and bearing
 #
