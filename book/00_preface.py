@@ -36,7 +36,12 @@
 # 9. **Real logs**: reading robot data and maps, and a command-line localizer.
 # 10. **MCL versus the EKF**: which filter to use, measured.
 #
-# ### Why not simply use GPS?
+# Every chapter is a Jupyter notebook that imports the companion package
+# `localize`. The package is also meant for your own work and homework: every
+# function in it is documented, tested, and fast enough for real data.
+
+# %% [markdown]
+# ## Why not simply use GPS?
 #
 # Satellite navigation answers "where am I?" outdoors, so why a book on
 # localization? A GPS receiver measures how long the signals of at least four
@@ -48,14 +53,11 @@
 # buildings the receiver often hears a reflection instead of the direct signal.
 # A consumer receiver under open sky is therefore off by one to several metres —
 # enough to put a robot in the wrong room or a car in the wrong lane. And
-# indoors, where most of this book's robots live, the signals are too weak to
-# be received at all: walls and ceilings absorb them. A robot has to localize
+# indoors, where most of this book's robots live, it usually gives no usable fix
+# at all: walls and ceilings weaken the signals, and what arrives is mostly
+# reflections. A robot has to localize
 # itself against what it can sense — its own wheels and the walls around it —
 # and that is what the following chapters do.
-#
-# Every chapter is a Jupyter notebook that imports the companion package
-# `localize`. The package is also meant for your own work and homework: every
-# function in it is documented, tested, and fast enough for real data.
 
 # %% [markdown]
 # ## Running the book

@@ -364,6 +364,12 @@ kidnap_widget()
 fig = kidnap_figure()
 print(f"recovered {fig.summary['recovered']} steps after the kidnapping; "
       f"injected while localized: {fig.summary['injected_localized']:.0%} of the particles per step")
+# the suggestions above, checked: a slower alpha_fast or a temperature of 36 calm the bursts
+from localize.widgets.recovery import kidnap_summary, kidnap_trial  # noqa: E402
+
+slow_fast, per_beam = kidnap_summary(*kidnap_trial(alpha_fast=0.2)), kidnap_summary(*kidnap_trial(temperature=36.0))
+assert max(slow_fast["injected_localized"], per_beam["injected_localized"]) < 0.5 * fig.summary["injected_localized"]
+assert slow_fast["recovered"] is None or slow_fast["recovered"] > fig.summary["recovered"]   # ... and react later
 fig
 #
 # ## KLD-sampling: as many particles as needed
