@@ -702,6 +702,11 @@ print(f"{seen.sum()} readings, EM converged after {fit.n_iter} iterations")
 print(f"{'parameter':14s} {'true':>7s} {'EM':>7s} {'EM, PR lambda':>14s}")
 for k in truth:
     print(f"{k:14s} {truth[k]:7.3f} {fit.params[k]:7.3f} {fit_pr.params[k]:14.3f}")
+# "recovers known parameters": weights within 0.01 (about 3 standard errors for 12,000 readings), sigma_hit
+# within 5 % and lambda_short within 10 %; PR's closed-form lambda ignores the truncation and is far off
+assert all(abs(fit.params[k] - truth[k]) < 0.01 for k in ("z_hit", "z_short", "z_max", "z_rand"))
+assert abs(fit.params["sigma_hit"] / truth["sigma_hit"] - 1) < 0.05
+assert abs(fit.params["lambda_short"] / truth["lambda_short"] - 1) < 0.1 < abs(fit_pr.params["lambda_short"] / truth["lambda_short"] - 1)
 
 # %% [markdown]
 # With real data the fitted model is only as good as the poses used to
