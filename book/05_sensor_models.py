@@ -723,8 +723,12 @@ assert abs(fit.params["lambda_short"] / truth["lambda_short"] - 1) < 0.1 < abs(f
 # shows that pose's ray-cast scan (blue) against the measured scan (orange),
 # the right panel both as range profiles, and the title gives the scan's
 # log-likelihood and its weight relative to the true pose. Try to find
-# another pose that explains the scan almost as well. (In the static book,
-# the figure after the widget shows its starting state.)
+# another pose that explains the scan almost as well. The $x$ and $y$
+# sliders step from cell centre to cell centre and the heading in whole 2°
+# steps: the table lookup works per cell and per heading bin, so a slider
+# sitting on a cell edge would flip between two cells on the last bit of its
+# value. (In the static book, the figure after the widget shows its starting
+# state.)
 
 # %% tags=["nbval-ignore-output"]
 pose_scan_widget(grid, beam, angles, measured, start=true_pose + [0.4, 0.2, 0.0], reference_pose=true_pose)
