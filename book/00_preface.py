@@ -43,6 +43,25 @@
 # function in it is documented, tested, and fast enough for real data.
 
 # %% [markdown]
+# ## Why not simply use GPS?
+#
+# Satellite navigation answers "where am I?" outdoors, so why a book on
+# localization? A GPS receiver measures how long the signals of at least four
+# satellites took to reach it and intersects the resulting spheres. Every
+# nanosecond of timing error is 30 cm of range error, and the errors do not
+# vanish: the satellites' orbits and clocks are known only approximately, the
+# atmosphere slows the signals by an amount that changes with the weather, the
+# receiver's cheap clock must be estimated along with the position, and near
+# buildings the receiver often hears a reflection instead of the direct signal.
+# A consumer receiver under open sky is therefore off by one to several metres —
+# enough to put a robot in the wrong room or a car in the wrong lane. And
+# indoors, where most of this book's robots live, it usually gives no usable fix
+# at all: walls and ceilings weaken the signals, and what arrives is mostly
+# reflections. A robot has to localize
+# itself against what it can sense — its own wheels and the walls around it —
+# and that is what the following chapters do.
+
+# %% [markdown]
 # ## Running the book
 #
 # From a clone of the repository, one command installs everything and opens the
@@ -201,6 +220,7 @@ except ValueError as err:
 rng = np.random.default_rng(2026)
 office = maps.office()
 print(office)
+assert np.allclose(office.extent[1] - office.extent[0], 20.0) and np.allclose(office.extent[3] - office.extent[2], 12.0)
 fig, ax = plt.subplots(figsize=(8, 5))
 draw_map(office, ax=ax)
 draw_poses(office.sample_free(200, rng), ax=ax, length=0.4, color="tab:orange", alpha=0.7)

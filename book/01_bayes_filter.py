@@ -93,6 +93,7 @@ unnormalised = likelihood * belief
 print("sum before normalising:", round(float(unnormalised.sum()), 4))
 belief = discrete.update(belief, likelihood)
 print("after reading 'door': door cells", round(float(belief[2]), 4), " wall cells", round(float(belief[0]), 4))
+assert np.isclose(unnormalised.sum(), 0.325)
 
 # %% [markdown]
 # The number we divided by, $p(z) = \sum_x p(z\mid x)\,\overline{\mathrm{bel}}(x) = 0.325$,
@@ -128,6 +129,7 @@ predicted = discrete.predict(belief, kernel, offset=1)
 print("fast   :", predicted.round(3)[:8])
 print("loops  :", discrete.predict_readable(belief, kernel, offset=1).round(3)[:8])
 print("still sums to", round(float(predicted.sum()), 6))
+assert round(float(belief[2]), 3) == 0.115 and round(float(predicted[3]), 3) == 0.100   # the peak's drop, in the text below
 
 fig, axes = plt.subplots(2, 1, figsize=(7, 3.8), sharex=True)
 draw_bars(belief, axes[0], world=world, title="after reading 'door'")
@@ -240,6 +242,7 @@ for _ in range(5):
     b5 = discrete.update(b5, np.where(world == 1, 0.75, 0.25))
 print(f"P(at some door) after one reading: {b1[world == 1].sum():.3f}; "
       f"after the same reading counted 5 times: {b5[world == 1].sum():.3f}")
+assert round(b5[world == 1].sum(), 2) == 0.98 and round(b1[world == 1].sum(), 2) == 0.35
 
 # %% [markdown]
 # The evidence did not change, yet the filter is nearly certain the robot is at
@@ -264,11 +267,14 @@ for mode in ["wrap", "constant"]:
     moved = discrete.predict(b, kernel, offset=2, mode=mode)
     print(f"{mode:8s}: cells 0-2 {moved[:3].round(3)}, cells 17-19 {moved[17:].round(3)}, "
           f"sum {moved.sum():.3f}")
+assert np.allclose(moved[18:], [0.2 * 0.1, 0.2 * 0.8 + 0.3 * 0.1]) and round(1 - moved.sum(), 2) == 0.79
 
 # %% [markdown]
 # In the wrapped world most of the belief re-appeared at the start of the
-# hallway; in the bounded one only the undershoot of the last cells is left, and
-# 79 % of the mass fell off. In a bounded world the motion model should say what
+# hallway. In the bounded one only the moves that end inside the hallway are
+# left: cell 17's intended move of two cells (0.2 x 0.8 = 0.16) and the
+# undershoots of cells 17 and 18 (0.02 and 0.03), so cell 19 holds 0.19 and
+# cell 18 holds 0.02; the other 79 % of the mass fell off. In a bounded world the motion model should say what
 # the robot does at a wall (it stops). Our `predict` treats the edge as a drop;
 # an exercise asks you to model the stop.
 
@@ -305,6 +311,7 @@ for _ in range(n_runs):
     right = rng.random(n_steps) < 0.75             # the real sensor: right 75 % of the time
     runs.append((cells[-1], np.where(right, world[cells], 1 - world[cells])))
 
+outcome = {}
 for p_hit, p_miss in [(0.75, 0.25), (0.99, 0.01), (1.0, 0.0)]:
     correct, claimed, crashed = [], [], 0
     for last_cell, readings in runs:
@@ -316,11 +323,17 @@ for p_hit, p_miss in [(0.75, 0.25), (0.99, 0.01), (1.0, 0.0)]:
             crashed += 1
     print(f"model p_hit={p_hit:4.2f}: most likely cell is right in {np.mean(correct):4.0%} of runs, "
           f"the filter claims {np.mean(claimed):4.0%}; ZeroLikelihoodError in {crashed / n_runs:4.0%}")
+    outcome[p_hit] = (np.mean(correct), np.mean(claimed), crashed / n_runs)
 
 try:
     run_with_model(runs[0][1], 1.0, 0.0)
 except discrete.ZeroLikelihoodError as err:
     print("for example:", str(err)[:74], "...")
+# the claims of the text below
+se = np.sqrt(outcome[0.75][0] * (1 - outcome[0.75][0]) / n_runs)    # sampling error of the hit rate
+assert round(100 * se, 1) == 2.4 and abs(outcome[0.75][0] - outcome[0.75][1]) < 2 * se   # calibrated
+assert outcome[0.99][1] > 2 * outcome[0.99][0] and abs(outcome[0.99][0] - outcome[0.75][0]) < 3 * se
+assert outcome[1.0][2] > 0.5                             # "fails in most runs"
 
 # %% [markdown]
 # Over 300 simulated runs of 15 readings, the filter with the honest model

@@ -29,7 +29,8 @@
 # You will learn
 #
 # * the sense / move cycle on a 2-D grid of coloured tiles, with the numbers;
-# * why a perfect motion model is a shift, and why we never shift in exact zeros;
+# * why a perfect motion model is a shift, and why we do not shift in exact zeros
+#   when we doubt the model;
 # * a noisy motion model as a small 2-D kernel, turned with the robot's action;
 # * why fine grids are expensive (a city with headings and speeds needs
 #   $10^{10}$ cells), and a **coarse-to-fine** localizer that cuts the cost a
@@ -97,12 +98,24 @@ assert np.all(belief[blue].round(3) == 0.097) and np.all(belief[~blue].round(3) 
 # If the robot always did exactly what it was told, moving left would move every
 # tile's probability one tile to the left: a **shift**. What falls off the left
 # edge is gone. What enters on the right? A perfect robot cannot be in the
-# rightmost column after moving left, so zero would be correct — and dangerous: a
-# tile with zero belief stays at zero forever (zero times anything is zero), so a
-# robot that in fact did not move could never be found again. We therefore put a
-# small value there, `fill = 0.001`, and then normalise. `histogram.move` does the
-# shift, the fill and the normalisation; with `normalize=False` we see the
-# intermediate table.
+# rightmost column after moving left, so zero is the exact Bayes answer — and
+# dangerous if the motion model is not quite right: no reading can lift a tile
+# with zero belief (zero times anything is zero), so if the robot in fact did not
+# move, its true tile would be ruled out for as long as the shifts keep it at
+# zero. We therefore put a small value there, `fill = 0.001`, and then normalise.
+# `histogram.move` does the shift, the fill and the normalisation; with
+# `normalize=False` we see the intermediate table.
+#
+# The library's default is `fill=0.0`, the exact answer for a model you trust
+# (and the one to use when you check a hand calculation, as exercise 1 does);
+# pass a small positive `fill`, as here, when you do not trust it. The same
+# reasoning explains why `histogram.move` and the hallway's `discrete.predict`
+# have different defaults: the tile world has edges, so `move` is bounded
+# (`mode="constant"`) and belief that leaves the floor is lost — it must
+# renormalise to return a distribution, and does so by default. The hallway of
+# chapter 1 is cyclic by default (`mode="wrap"`, as in `filterpy`): nothing is
+# lost, so `predict` never needs to renormalise, and in its bounded mode it
+# leaves the sum below one on purpose, so that the lost mass stays visible.
 
 # %%
 shifted = histogram.move(belief, "left", fill=0.001, normalize=False)
@@ -138,14 +151,19 @@ seed_green = np.array([
 print(belief.round(4))
 diff = np.abs(belief - seed_green)
 print(f"largest difference to the printed table: {diff.max():.4f}")
-assert diff[:, :6].max() < 0.0015          # the 30 tiles that had a real prior: equal to the printed digits
+assert diff[:, :6].max() < 0.0015          # the 30 tiles that had a real prior: within 0.0015 of the printed digits
+assert np.isclose(belief[1, 3], 0.1554, atol=5e-5) and round(float(belief[1, 3]), 3) == 0.155  # printed as .154
+assert np.allclose(belief[[0, 1, 2], [6, 6, 6]], [0.0003, 0.0003, 0.0016], atol=5e-5)
 
 # %% [markdown]
-# All tiles agree with the printed table to its three digits (the table rounds
-# 0.0274 down to .027 and 0.1554 down to .154), except the rightmost column:
-# the table shows .0001 and .001 where Bayes rule gives 0.0003 and 0.0016 —
-# the printed column was rounded more coarsely. The pattern (which tiles are
-# high, which low) is the same.
+# The 30 tiles that had a real prior agree with the printed table to within
+# 0.0015, but not all to its three digits: 0.0274 is printed as .027 (right),
+# 0.0048 as .005 (right), while 0.1554 — which rounds to .155 — is printed as
+# .154, one unit off in the last digit (the hand calculation must have rounded an
+# intermediate value). The rightmost column differs more: the table shows .0001
+# and .001 where Bayes rule gives 0.0003 and 0.0016 — the printed column was
+# rounded more coarsely. The pattern (which tiles are high, which low) is the
+# same.
 #
 # Now **move up** (again perfectly, with `fill = 0.001`) and read **red**:
 
@@ -164,13 +182,26 @@ print("most likely tile:", tuple(int(i) for i in best), f"with {belief.max():.3f
 far = np.argwhere(np.abs(belief - seed_red) > 0.004)
 print("tiles that differ from the printed table by more than 0.004:", [tuple(int(i) for i in f) for f in far])
 assert tuple(best) == (0, 3) and abs(belief.max() - 0.506) < 0.01
+assert [tuple(int(i) for i in f) for f in far] == [(0, 3), (1, 2), (3, 3)] and round(belief.max(), 3) == 0.501
 
 # %% [markdown]
 # The conclusion is the same — the robot is at the top row, fourth tile, with
 # about half of all the belief — but this last table of the example cannot be
 # matched everywhere by *any* colouring, because it is **internally
-# inconsistent**:
-#
+# inconsistent**. To see why, put the printed table next to the prior it was
+# computed from, which is the printed green table moved up one row:
+
+# %%
+prior_printed = np.vstack([seed_green[1:], np.full((1, 7), np.nan)])   # the bottom row comes from `fill`
+print("prior (printed green table moved up; bottom row: fill, not stated):\n", prior_printed)
+print("printed table after reading red:\n", seed_red)
+assert prior_printed[1, 2] == 0.005 and seed_red[1, 2] == 0.014            # (1, 2): rose like a red tile
+assert seed_green[1, 2] == 0.027                                            # ... but rose on green before
+assert prior_printed[3, 3] == 0.027 and seed_red[3, 3] == 0.003             # (3, 3): fell below any Bayes answer
+assert tuple(seed_red[0:2, 4]) == (0.014, 0.014) and seed_red[1, 3] == 0.087  # rows 0-1: .014 and .087 ...
+assert (seed_red[2, 1], seed_red[2, 3]) == (0.016, 0.089)                   # ... rows 2-3: .016 and .089
+
+# %% [markdown]
 # * tile (1, 2) would have to be red (its value rose from .005 to .014 like the
 #   other red tiles) although the previous table made it green (its value rose
 #   from .019 to .027 on reading green); a tile cannot be both. We kept it green.
@@ -344,6 +375,7 @@ print(f"final true tile {tuple(int(v) for v in pos)}; multi-scale estimate {mult
 print(f"cell updates: full grid {single.cells_updated:,}, multi-scale {multi.cells_updated:,}, "
       f"saving x{single.cells_updated / multi.cells_updated:.0f}")
 assert multi.estimate() == single.estimate() == tuple(int(v) for v in pos)
+assert round(single.cells_updated / multi.cells_updated) == 100             # "about a hundredth of the work"
 
 # %%
 fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
@@ -406,8 +438,9 @@ plt.show()
 #
 # * Histogram localization is the Bayes filter on a grid: sense multiplies by a
 #   likelihood map, move shifts and convolves with a motion kernel.
-# * Never let a cell reach exactly zero unless it is truly impossible: `fill`
-#   keeps the filter able to recover.
+# * Do not let a cell reach exactly zero unless it is truly impossible: a small
+#   `fill` keeps the filter able to recover from a wrong motion model (the
+#   library's default, `fill=0.0`, is the exact answer for a model you trust).
 # * A noisy motion model is a small kernel, turned with the action.
 # * The cost grows with the number of cells, which grows *exponentially* with the
 #   number of state variables. Coarse-to-fine localization pays for a fine grid

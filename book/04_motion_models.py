@@ -210,25 +210,104 @@ alphas = [0.05, 0.01, 0.02, 0.02]
 slow = motion.sample_motion_model_odometry(start, u, alphas, np.random.default_rng(7))
 fast = motion.sample_odometry(start[None], u, alphas, np.random.default_rng(7))[0]
 print("readable:", slow.round(6), " fast:", fast.round(6))
+assert np.allclose(slow, fast)
+
+# %% [markdown]
+# ### Drawing the noise: sums of uniforms, or numpy
+#
+# Line 5-7 of the sampler need one Gaussian draw each. `localize` takes them
+# from numpy's `Generator.standard_normal`, which uses the ziggurat method:
+# exact (up to floating point) and fast. PR (table 5.4) shows two older tricks
+# that need nothing but a uniform generator, and some course code still uses
+# them. Both rest on the central limit theorem in miniature: a sum of
+# independent uniforms is already bell-shaped.
+#
+# * **Normal, variance $b^2$:** $	frac12 \sum_{i=1}^{12} \mathrm{rand}(-b, b)$.
+#   One uniform on $[-b, b]$ has variance $b^2/3$; twelve have $4b^2$, and
+#   halving divides the variance by four.
+# * **Triangular, variance $b^2$:** $	frac{\sqrt 6}{2}\,ig(\mathrm{rand}(-b, b) + \mathrm{rand}(-b, b)ig)$.
+#   Two uniforms give a tent on $[-2b, 2b]$ with variance $2b^2/3$; the factor
+#   $\sqrt6/2$ scales it to $b^2$ and to the support $[-\sqrt6 b, \sqrt6 b]$.
+#
+# They are approximations with visible limits: the twelve-uniform "normal" can
+# never go beyond $6b$ (a true normal does, once in $10^9$ draws) and its tails
+# are a little thin; the triangular distribution has no tails at all, which is
+# why it is occasionally used on purpose, as a cheap noise that cannot produce
+# outliers. Neither is faster than numpy's generator, which draws one number
+# where they draw twelve or two.
+
+# %%
+rng_u = np.random.default_rng(54)            # its own generator, so the rest of the chapter is unchanged
+b_sd, n_u = 0.1, 200_000
+normal_12 = 0.5 * rng_u.uniform(-b_sd, b_sd, (n_u, 12)).sum(axis=1)
+triangular = np.sqrt(6) / 2 * rng_u.uniform(-b_sd, b_sd, (n_u, 2)).sum(axis=1)
+numpy_normal = b_sd * rng_u.standard_normal(n_u)
+print("                    std     kurtosis  largest |value| / b")
+for name, v in [("12 uniforms", normal_12), ("triangular", triangular), ("numpy normal", numpy_normal)]:
+    kurt = np.mean((v - v.mean()) ** 4) / v.var() ** 2
+    print(f"{name:15s}   {v.std():.4f}    {kurt:.2f}      {np.abs(v).max() / b_sd:.2f}")
+se_std = b_sd / np.sqrt(2 * n_u)             # standard error of a sample std
+assert all(abs(v.std() - b_sd) < 5 * se_std * 1.2 for v in (normal_12, triangular, numpy_normal))
+assert np.abs(triangular).max() <= np.sqrt(6) * b_sd and np.abs(normal_12).max() <= 6 * b_sd
+kurtosis = {name: np.mean((v - v.mean()) ** 4) / v.var() ** 2
+            for name, v in [("12", normal_12), ("tri", triangular), ("np", numpy_normal)]}
+assert abs(kurtosis["12"] - 2.9) < 0.05 and abs(kurtosis["tri"] - 2.4) < 0.05 and abs(kurtosis["np"] - 3) < 0.06
+
+fig, ax = plt.subplots(figsize=(6.5, 3))
+bins = np.linspace(-0.4, 0.4, 81)
+for v, label in [(numpy_normal, "numpy standard_normal"), (normal_12, "sum of 12 uniforms"),
+                 (triangular, "triangular (sum of 2)")]:
+    ax.hist(v, bins=bins, density=True, histtype="step", label=label)
+ax.set_xlabel("noise value (b = 0.1)")
+ax.set_ylabel("density")
+ax.legend(fontsize=8)
+ax.set_title("three ways to draw zero-mean noise of standard deviation 0.1 (PR table 5.4)", fontsize=9)
+plt.show()
+
+# %% [markdown]
+# All three have the standard deviation asked for. The sum of twelve uniforms
+# is hard to tell from the normal by eye (its kurtosis is 2.9 instead of 3:
+# slightly thinner tails); the triangle is clearly different, and its kurtosis
+# of 2.4 says it. For a particle filter the difference between the first two
+# does not matter; use numpy's generator, which is exact, faster and already
+# seeded through `rng`.
 
 # %% [markdown]
 # ### The banana
 #
 # Draw 500 successors of one pose for three settings of the alphas, in the
 # spirit of PR figure 5.9: typical noise, large rotational noise ($\alpha_1$
-# ten times larger) and large translational noise ($\alpha_3$ ten times
-# larger). The motion is the step above: a small turn, 1 m ahead, another
-# small turn.
+# ten times larger, $\alpha_2$ — rotation error per metre driven — also ten
+# times larger) and large translational noise ($\alpha_3$ ten times larger).
+# The motion is a small turn, 2 m ahead, another small turn. It has to be a
+# long drive for the banana to show: rotation noise moves the end point
+# sideways by the angle error *times the distance*, and only when that
+# sideways spread is large compared with the spread along the way does the
+# cloud bend.
 
 # %%
-u_demo = ((0.0, 0.0, 0.0), (1.0, 0.3, 0.6))
-fig = banana_figure(u_demo, PR_FIG_5_9_ALPHAS, rng,
-                    titles=["typical", "large rotation noise ($\\alpha_1$)", "large translation noise ($\\alpha_3$)"])
+u_demo = ((0.0, 0.0, 0.0), (1.0, 0.3, 0.6))      # the step of the later sections
+u_banana = ((0.0, 0.0, 0.0), (2.0, 0.4, 0.5))
+fig = banana_figure(u_banana, PR_FIG_5_9_ALPHAS, rng,
+                    titles=["typical", "large rotation noise ($\\alpha_1, \\alpha_2$)",
+                            "large translation noise ($\\alpha_3$)"])
 fig
+
+# %%
+# the shape in numbers: spread across and along the direction of travel, for each panel
+r1_b, tr_b, r2_b = motion.odometry_to_control(*u_banana)
+shape = []
+for name, a in zip(["typical", "large rotation", "large translation"], PR_FIG_5_9_ALPHAS):
+    sd_rot1, sd_trans, _ = np.sqrt(motion.odometry_variances(r1_b, tr_b, r2_b, a))
+    shape.append(sd_rot1 * tr_b / sd_trans)
+    print(f"{name:18s}: sideways spread {sd_rot1 * tr_b:.2f} m, along the way {sd_trans:.2f} m, "
+          f"ratio {shape[-1]:.1f}")
+assert shape[1] > 2.5 and shape[2] < 0.5       # a banana (wide and curved) and a streak along the way
 
 # %% [markdown]
 # Rotation noise swings the end point around the start on a circle of
-# radius $\delta_\text{trans}$: that is the curved, banana-shaped cloud. Translation
+# radius $\delta_\text{trans}$: with a sideways spread three times the spread
+# along the way, that is the curved, banana-shaped cloud of the middle panel. Translation
 # noise stretches the cloud along the direction of travel. Which of the two
 # dominates decides where a particle filter needs its particles: after a long
 # straight drive, spread along the corridor; after a sharp turn, spread
@@ -300,9 +379,12 @@ try:
     motion.odometry_pdf([0.0, 0.0, 1.0], turn_on_spot, start, [0.05, 0.01, 0.02, 0.02])
 except ValueError as err:
     print("ValueError:", str(err)[:120], "...")
+dens_by_dist = []
 for dist in (0.02, 0.01, 0.005):
     dens = motion.odometry_pdf([dist, 0.0, 1.0], turn_on_spot, start, [0.05, 0.01, 0.02, 0.02], min_std=0.01)
     print(f"with min_std=0.01, {dist * 100:.1f} cm ahead of the start: {float(dens):.1f}")
+    dens_by_dist.append(float(dens))
+assert all(1.9 < a / b < 2.1 for a, b in zip(dens_by_dist[1:], dens_by_dist))   # halving the distance doubles it
 
 # %% [markdown]
 # Halving the distance to the start roughly doubles the density: that is the
@@ -350,6 +432,9 @@ print(f"integral of odometry_pdf                {p_ours.sum() * cell:.4f}")
 print(f"integral of odometry_pdf x trans_hat    {(p_ours * d_hat).sum() * cell:.4f}   (no Jacobian)")
 print(f"integral of table 5.5 as printed        {p_pr.sum() * cell:.4f}")
 print(f"integral of table 5.5 / trans_hat       {(p_pr / d_hat).sum() * cell:.4f}")
+assert abs(p_ours.sum() * cell - 1) < 2e-3
+assert abs((p_ours * d_hat).sum() * cell - motion.odometry_to_control(*u_int)[1]) < 0.01   # "about 1.55 m"
+assert abs((p_pr / d_hat).sum() * cell - 1.15) < 0.01
 
 # %% [markdown]
 # Our density integrates to one. Without the Jacobian it integrates to the
@@ -395,6 +480,8 @@ print("sample cov\n", np.cov(big.T).round(4))
 print("density cov\n", c_d.round(4))
 m_pr, _ = grid_mean_cov(p_pr / d_hat)
 print("table 5.5 / trans_hat, mean", m_pr.round(4))
+std_err = big.std(axis=0) / np.sqrt(len(big))
+assert np.all(std_err < 0.0015) and np.all(np.abs(m_pr - m_d) > 10 * std_err)   # "around a millimetre"; "far more"
 
 # %% [markdown]
 # ## The velocity motion model
@@ -556,10 +643,14 @@ for noise in ("squared", "absolute", cmu_variances):
 plus = motion.sample_odometry(np.zeros((3, 3)), u_demo, a_cmu, np.random.default_rng(1), noise=cmu_variances, sign=+1)
 minus = motion.sample_odometry(np.zeros((3, 3)), u_demo, a_cmu, np.random.default_rng(1), noise=cmu_variances, sign=-1)
 print("sign=+1:\n", plus.round(4), "\nsign=-1:\n", minus.round(4))
+sd_sq = np.sqrt(motion.odometry_variances(0.2, 0.1, -0.2, a_cmu, "squared"))
+sd_abs = np.sqrt(motion.odometry_variances(0.2, 0.1, -0.2, a_cmu, "absolute"))
+print(f"rotation noise, absolute against squared: {sd_abs[0] / sd_sq[0]:.1f} times larger")
+assert 2 < sd_abs[0] / sd_sq[0] < 3
 
 # %% [markdown]
 # Note how different the 10 cm step is: with absolute values the rotation
-# noise of a short step is several times larger than with squares.
+# noise of a short step is about two and a half times larger than with squares.
 
 # %% [markdown]
 # ## Many particles, many steps

@@ -62,7 +62,13 @@ from localize.plot import draw_map, draw_robot
 from localize.plot.sensors import plot_beam_pdf, plot_likelihood_field, plot_ranges, plot_scan_on_map
 from localize.raycast import RayCaster, cast, cast_ray
 from localize.sensors import BeamModel, LandmarkModel, LikelihoodField, select_beams
-from localize.widgets.sensors import beam_density_widget, pose_scan_figure, pose_scan_widget, pseudo_density_figure
+from localize.widgets.sensors import (
+    beam_density_widget,
+    pose_scan_figure,
+    pose_scan_start,
+    pose_scan_widget,
+    pseudo_density_figure,
+)
 
 rng = np.random.default_rng(5)
 grid = maps.office()
@@ -248,6 +254,51 @@ plt.show()
 # `RayCaster(grid, max_range, method)` and call its `cast` at every step:
 # it keeps the field or the table.
 #
+# ### The simplest marcher, and its step size
+#
+# Many first implementations (the CMU homework reports among this book's
+# sources, for example) cast a ray by walking along it in **fixed steps**:
+# look up the cell under the point, stop at the first occupied one. Two errors
+# follow from the step $s$. The range comes out up to one step too long, since
+# the wall is noticed only at the first sample inside it; and a sample can land
+# *beyond* a wall thinner than a step — or cut the corner of an obstacle cell —
+# so the ray **slips through** and reads whatever lies behind. The first error
+# is bounded by $s$; the second is not bounded at all. A step no longer than
+# the cell size keeps both small but costs $r/s$ lookups per ray, which is what
+# the marcher above avoids. (A classic slip when writing the loop: adding the
+# distance travelled to itself instead of adding the step doubles the step each
+# time, so far ranges are sampled ever more coarsely.) On the random map above:
+
+# %%
+def fixed_step_cast(grid, poses, angles, max_range, step):
+    """Walk every ray in steps of ``step`` metres; first sample in an obstacle (or off the map) ends it."""
+    t = np.arange(step, max_range + step / 2, step)                       # sample distances
+    a = poses[:, 2:3] + angles[None, :]                                  # (P, B) beam directions
+    px = poses[:, 0, None, None] + t * np.cos(a)[..., None]               # (P, B, S)
+    py = poses[:, 1, None, None] + t * np.sin(a)[..., None]
+    j = np.floor((px - grid.origin[0]) / grid.resolution).astype(int)
+    i = np.floor((py - grid.origin[1]) / grid.resolution).astype(int)
+    inside = (i >= 0) & (i < grid.shape[0]) & (j >= 0) & (j < grid.shape[1])
+    blocked = ~inside | grid.obstacles[np.clip(i, 0, grid.shape[0] - 1), np.clip(j, 0, grid.shape[1] - 1)]
+    first = np.where(blocked.any(axis=-1), blocked.argmax(axis=-1), t.size - 1)
+    return np.minimum(t[first], max_range)
+
+
+print(" step [m] | lookups per ray | mean |error| | rays that slip through (error > 0.5 m)")
+slips = {}
+for s_step in (0.05, 0.1, 0.2, 0.4):
+    z_fixed = fixed_step_cast(rmap, r_poses, r_angles, 6.0, s_step)
+    err_fixed = np.abs(z_fixed - z_exact)
+    slips[s_step] = np.mean(err_fixed > 0.5)
+    print(f"  {s_step:5.2f}  | {6.0 / s_step:15.0f} | {100 * err_fixed.mean():9.1f} cm | {slips[s_step]:8.2%}")
+assert slips[0.05] < slips[0.2] < slips[0.4]
+
+# %% [markdown]
+# With steps of half a cell the error is a few centimetres and rays rarely
+# slip; at two and four cells a growing share of rays passes through thin walls
+# and corners — and those are the beams that ruin a particle's weight, since
+# they report a far wall where the map has a near one.
+#
 # ## The beam model
 #
 # A real scan is not the expected scan plus a little Gaussian noise. People
@@ -268,8 +319,11 @@ plt.show()
 # * **rand**: a random reading, uniform $1/z_\text{max}$ on $[0, z_\text{max})$.
 #
 # $$p(z \mid z^*) = z_\text{hit}\,p_\text{hit} + z_\text{short}\,p_\text{short}
-#  + z_\text{max}\,p_\text{max} + z_\text{rand}\,p_\text{rand},\qquad
-#  z_\text{hit} + z_\text{short} + z_\text{max} + z_\text{rand} = 1.$$
+#  + z_\text{max}\,p_\text{max} + z_\text{rand}\,p_\text{rand},$$
+#
+# with weights that sum to one,
+#
+# $$z_\text{hit} + z_\text{short} + z_\text{max} + z_\text{rand} = 1.$$
 #
 # (One of the seed reports writes the exponential with a scale instead of a
 # rate, $\frac{1}{\lambda}e^{-z/\lambda}$, and without its normaliser; PR and
@@ -340,6 +394,7 @@ ax.set_xlabel("z [m]")
 ax.legend()
 plt.show()
 print(f"fraction of max-range readings: {np.mean(draws == MAX_RANGE):.4f} (z_max = {beam.z_max})")
+assert abs(np.mean(draws == MAX_RANGE) - beam.z_max) < 5 * np.sqrt(beam.z_max * (1 - beam.z_max) / draws.size)
 
 # %% [markdown]
 # ## Expected versus measured scans
@@ -393,6 +448,7 @@ for c, lp, s in zip(cands, log_product, beam_sum):
     print(f"y = {c[1]:.1f}: log of the product {lp:8.1f}   sum of densities {s:6.2f}")
 print(f"true pose versus 10 cm off: product ratio exp({log_product[0] - log_product[1]:.1f}), "
       f"sum ratio {beam_sum[0] / beam_sum[1]:.2f}")
+assert log_product[0] - log_product[1] > 20 and beam_sum[0] / beam_sum[1] < 2   # the sum separates weakly
 
 # %% [markdown]
 # One of the seed reports scored a particle by *summing* the per-beam
@@ -420,6 +476,8 @@ for name, model in [("plain Gaussian", gauss), ("mixture", beam)]:
     ll = model.log_likelihood(two, measured, angles)
     winner = "true pose" if ll[0] > ll[1] else "WRONG pose"
     print(f"{name:15s}: log-likelihood true {ll[0]:12.1f}, 30 cm off {ll[1]:12.1f} -> {winner} wins")
+    assert (ll[0] > ll[1]) == (name == "mixture")
+assert np.isclose(0.5 * (3 / 0.15) ** 2, 200)      # the cost of one beam 3 m short, below
 
 # %% [markdown]
 # Under the Gaussian a beam that reads 3 m short costs $\frac12(3/0.15)^2 =
@@ -456,6 +514,7 @@ for label, kwargs in [("all 61 beams", {}), ("max_beams = 12", {"max_beams": 12}
 print(f"{len(cloud)} particles around the true pose")
 for label, e in rows:
     print(f"  {label:28s} ESS = {e:7.1f}")
+assert all(e > 2 * rows[0][1] for _, e in rows[1:])    # both remedies widen the posterior
 
 # %% [markdown]
 # Two standard remedies, both options of every range model here:
@@ -507,13 +566,30 @@ plt.show()
 # %%
 offsets = np.array([[0, 0, 0], [0.2, 0, 0], [-0.2, 0, 0], [0, 0.2, 0], [0, -0.2, 0], [0, 0, 0.1], [0, 0, -0.1]])
 cands = true_pose + offsets
+drop = {}
 for name, model in [("beam model", beam), ("likelihood field", lf)]:
     ll = model.log_likelihood(cands, measured, angles)
-    print(f"{name:17s} log-likelihood minus the true pose's:", (ll - ll[0]).round(1))
+    drop[name] = ll - ll[0]
+    print(f"{name:17s} log-likelihood minus the true pose's:", drop[name].round(1))
+b_, f_ = drop["beam model"], drop["likelihood field"]
+assert np.all(b_[3:] < -25) and np.all(f_[[4, 5, 6]] < -10)   # sharp across (beam model) and in heading
+assert -5 < f_[3] < 0                                          # ... but the field hardly notices +20 cm in y
+assert np.all(np.abs(b_[1:3]) < 5) and np.all(np.abs(f_[1:3]) < 5) and f_[1] > 0   # along: hardly at all
 
 # %% [markdown]
-# Across the corridor and in heading both models are sharp. *Along* the
-# corridor they hardly care: most beams end on the two long walls, which
+# In heading both models are sharp, and the beam model is sharp across the
+# corridor in both directions. The likelihood field is sharp for the shift
+# towards the lower wall ($-y$) but hardly notices the same shift towards the
+# upper one (a drop of only about 3 nats): it scores each end point by its
+# distance to the nearest obstacle in *any* direction, so end points pushed
+# into a wall still sit on an obstacle and score fully; each end point that
+# now falls short of the other wall loses at most a bounded amount (the
+# uniform floor caps the loss per beam at under 2 nats, where the beam model,
+# which follows the ray, loses up to about 6); and in this scan about as many end
+# points that sat slightly off the walls at the true pose land on them after
+# the shift. Which direction comes off lightly depends on the scan and on the
+# walls' thickness; the lesson is that the field's verdict across a corridor
+# is weaker than it looks. *Along* the corridor both models hardly care: most beams end on the two long walls, which
 # look the same 20 cm further on, and only the few beams that reach a door,
 # the pillar or the far end carry that information (the corridor version of
 # the aperture problem). The likelihood field even prefers the pose 20 cm
@@ -526,6 +602,67 @@ for name, model in [("beam model", beam), ("likelihood field", lf)]:
 # The likelihood field is smoother in the pose and much faster; it ignores
 # what lies *along* the beam (it happily accepts an end point behind a wall),
 # which the beam model does not. The MCL chapter compares both on real data.
+#
+# ### What came before: occupancy lookup and hit counting
+#
+# Before ray casting, the CMU homework reports among our sources tried two
+# cheaper scores, and both lost. Each projects the beams' end points into the
+# map, as the likelihood field does, and then
+#
+# * **occupancy lookup** reads the (smoothed) occupancy probability at every
+#   end point and adds them up: a pose scores well if its end points land on
+#   walls;
+# * **hit counting** thresholds that probability and counts the end points
+#   that land on an obstacle cell.
+#
+# Both reward end points on walls and punish nothing else. A pose whose beams
+# pass *through* walls, or that stands inside a wall or outside the building,
+# is not penalised as long as its end points happen to touch some obstacle; and
+# neither score is a likelihood, so it cannot be multiplied into Bayes rule
+# (the sum has the weakness of the previous section). The likelihood field is
+# what these become when done properly — a density of the distance to the
+# nearest obstacle, with a floor for unexplained readings — and the beam model
+# adds what lies along the ray. Compare the three scores on the scan with the
+# two people, at the true pose, 20 cm across the corridor, and at a pose *inside
+# the corridor's wall* facing the same way:
+
+# %%
+from scipy import ndimage  # noqa: E402
+
+occ = np.nan_to_num(np.asarray(grid.data, dtype=float), nan=1.0)
+smooth = ndimage.gaussian_filter(occ, sigma=1.0)                       # a blurred map, as in the reports
+
+
+def endpoint_scores(pose):
+    ends = lf.endpoints(np.asarray(pose)[None], measured, angles)[0][measured < MAX_RANGE]
+    ij = np.array([grid.world_to_cell(e) if grid.contains(e) else (-1, -1) for e in ends])
+    ok = ij[:, 0] >= 0
+    o = np.zeros(len(ends))
+    o[ok] = smooth[ij[ok, 0], ij[ok, 1]]
+    return o.sum(), int(np.sum(o >= 0.5))
+
+
+wall_y = next(y for y in np.arange(true_pose[1], 0, -0.05) if grid.obstacles[tuple(grid.world_to_cell([true_pose[0], y]))])
+test_poses = {"true pose": true_pose, "20 cm across": true_pose + [0, 0.2, 0],
+              "inside the wall": np.array([true_pose[0], wall_y, true_pose[2]])}
+print(f"{'':16s} | occupancy sum | hits | beam log-likelihood")
+scores = {}
+for name, pose in test_poses.items():
+    occ_sum, hits = endpoint_scores(pose)
+    scores[name] = (occ_sum, hits, float(beam.log_likelihood(pose[None], measured, angles)[0]))
+    print(f"{name:16s} | {occ_sum:13.1f} | {hits:4d} | {scores[name][2]:10.1f}")
+assert scores["inside the wall"][2] < scores["true pose"][2] - 100                  # the beam model: impossible
+assert scores["inside the wall"][1] >= 0.2 * scores["true pose"][1]                # hit counting: still plausible
+assert scores["true pose"][1] > scores["20 cm across"][1] > scores["inside the wall"][1]
+
+# %% [markdown]
+# The end-point scores do rank the three poses in the right order, but they
+# leave the pose inside the wall far from impossible — a quarter or so of the
+# true pose's hits, in a score that counts hits, not probability — while the
+# beam model rules it out by nearly 200 nats, because from inside a wall every
+# beam is expected to read zero. This is the failure the
+# reports describe — particles drifting out of the free space — and the reason
+# they moved to ray casting.
 #
 # ## Landmarks: range and bearing
 #
@@ -593,6 +730,11 @@ print(f"{seen.sum()} readings, EM converged after {fit.n_iter} iterations")
 print(f"{'parameter':14s} {'true':>7s} {'EM':>7s} {'EM, PR lambda':>14s}")
 for k in truth:
     print(f"{k:14s} {truth[k]:7.3f} {fit.params[k]:7.3f} {fit_pr.params[k]:14.3f}")
+# "recovers known parameters": weights within 0.01 (about 3 standard errors for 12,000 readings), sigma_hit
+# within 5 % and lambda_short within 10 %; PR's closed-form lambda ignores the truncation and is far off
+assert all(abs(fit.params[k] - truth[k]) < 0.01 for k in ("z_hit", "z_short", "z_max", "z_rand"))
+assert abs(fit.params["sigma_hit"] / truth["sigma_hit"] - 1) < 0.05
+assert abs(fit.params["lambda_short"] / truth["lambda_short"] - 1) < 0.1 < abs(fit_pr.params["lambda_short"] / truth["lambda_short"] - 1)
 
 # %% [markdown]
 # With real data the fitted model is only as good as the poses used to
@@ -609,14 +751,19 @@ for k in truth:
 # shows that pose's ray-cast scan (blue) against the measured scan (orange),
 # the right panel both as range profiles, and the title gives the scan's
 # log-likelihood and its weight relative to the true pose. Try to find
-# another pose that explains the scan almost as well. (In the static book,
-# the figure after the widget shows its starting state.)
+# another pose that explains the scan almost as well. The $x$ and $y$
+# sliders step from cell centre to cell centre and the heading in whole 2°
+# steps: the table lookup works per cell and per heading bin, so a slider
+# sitting on a cell edge would flip between two cells on the last bit of its
+# value. (In the static book, the figure after the widget shows its starting
+# state.)
 
 # %% tags=["nbval-ignore-output"]
 pose_scan_widget(grid, beam, angles, measured, start=true_pose + [0.4, 0.2, 0.0], reference_pose=true_pose)
 
 # %%
-fig = pose_scan_figure(grid, beam, angles, measured, *(true_pose[:2] + [0.4, 0.2]), np.degrees(true_pose[2]),
+# the widget's starting position: x and y on cell centres, the heading on the slider's 2-degree steps
+fig = pose_scan_figure(grid, beam, angles, measured, *pose_scan_start(grid, true_pose + [0.4, 0.2, 0.0]),
                        reference_pose=true_pose)
 plt.show()
 
@@ -768,22 +915,31 @@ def mean_ess(model, temper=1.0):
     return float(np.mean([ess(temper * model.log_likelihood(cloud, z, angles)) for z in scans]))
 
 
+ess_k = {}
 for k in (5, 10, 20, 61):
     m = BeamModel(grid, MAX_RANGE, **beam.params, caster=beam.caster, max_beams=k)
-    print(f"max_beams = {k:2d}: mean ESS = {mean_ess(m):7.1f}")
+    ess_k[k] = mean_ess(m)
+    print(f"max_beams = {k:2d}: mean ESS = {ess_k[k]:7.1f}")
 target = mean_ess(BeamModel(grid, MAX_RANGE, **beam.params, caster=beam.caster, max_beams=10))
 temps = np.geomspace(0.02, 1, 40)
 ess_t = np.array([mean_ess(beam, g) for g in temps])
 best = temps[np.argmin(np.abs(np.log(ess_t) - np.log(target)))]
 print(f"61 beams tempered by {best:.3f} give mean ESS {mean_ess(beam, best):.1f}, like 10 beams ({target:.1f})")
 print(f"61 beams x {best:.3f} = {61 * best:.1f} 'independent' beams")
+assert ess_k[5] > ess_k[20] > ess_k[10] > ess_k[61]          # higher with fewer beams, but not monotonic
+from localize.sensors import select_beams  # noqa: E402
+
+assert not set(select_beams(61, 10)) <= set(select_beams(61, 20))   # the 10 are not a subset of the 20
 
 # %% [markdown] tags=["solution"]
 # <details>
 # <summary><b>Solution</b> (click to show)</summary>
 #
-# The ESS grows as beams are dropped, and tempering the full scan by a factor $\gamma$ has a
-# similar effect. The $\gamma$ that matches 10 beams need not be $10/61$: the ESS of one cloud
+# Dropping beams raises the ESS overall (5 beams against all 61), but not
+# monotonically: here 20 beams give a *larger* mean ESS than 10. The 10 evenly spaced beams are
+# not a subset of the 20, and a handful of beams that happen to hit a person or a door edge
+# decides how peaked the weights are; with so few beams, which ones are kept matters as much as
+# how many. Tempering the full scan by a factor $\gamma$ widens the weights smoothly instead. The $\gamma$ that matches 10 beams need not be $10/61$: the ESS of one cloud
 # depends on *which* beams are kept (10 beams spread over the field of view keep most of the
 # geometry, while a random tenth of the log-likelihood would not), and on the outliers in each
 # scan, which is why we average over several scans. The product $61\gamma$ says how many

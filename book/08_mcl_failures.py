@@ -36,7 +36,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import localize
-from localize import maps
+from localize import maps, metrics
 from localize.kld import KLDSampling, kld_bound
 from localize.mcl import MCL, Augmented, OdometryMotion, estimate_pose, run_mcl
 from localize.metrics import heading_error, position_error
@@ -58,10 +58,11 @@ lf = LikelihoodField(office, MAX_RANGE, sigma_hit=0.2, temper=0.1)
 #
 # A particle filter can only weigh the hypotheses it has. Global localization
 # with 1000 particles in the 20 m × 12 m office puts one particle on every
-# 0.17 m² or so of free floor, each with a random heading; only one in sixteen
+# 0.2 m² or so of free floor, each with a random heading; only one in sixteen
 # points within ±0.2 rad (±11°) of the true heading, so the nearest particle
 # that is right in *both* position and heading is typically half a metre to a
-# metre away. If some wrong place happens to explain the first scans a little
+# metre away (for 62 such particles on 204 m², the mean distance to the
+# nearest is $\tfrac12\sqrt{204/62} \approx 0.9$ m). If some wrong place happens to explain the first scans a little
 # better than that nearest particle does, resampling moves every particle
 # there, and the neighbourhood of the true pose is **empty**: no later scan,
 # however clear, can bring weight to a hypothesis that no particle
@@ -86,6 +87,12 @@ err = position_error(tr_d.poses, run_d.poses)
 for k in (0, 1, 2, 5, 10, 29):
     where = f"{near[k]:5.2f} m away" if np.isfinite(near[k]) else "none with a heading within 0.2 rad"
     print(f"step {k:2d}: estimate {err[k]:5.2f} m off; nearest particle to the truth: {where}")
+free_area = office.free.sum() * office.resolution**2
+print(f"free floor per particle: {free_area / 1000:.2f} m²; share of headings within ±0.2 rad: 1 in "
+      f"{2 * np.pi / 0.4:.1f}")
+assert abs(free_area / 1000 - 0.2) < 0.01 and round(2 * np.pi / 0.4) == 16
+assert abs(0.5 * np.sqrt(free_area / (1000 / 16)) - 0.9) < 0.05
+assert near[0] < 1.0 and min(near[2:]) > 2.0 and err[-1] > 5.0     # deprived from step 2 on, and wrong
 
 # %%
 fig, axes = plt.subplots(1, 2, figsize=(12, 3.6))
@@ -162,6 +169,7 @@ for seed in range(8):
         run_h, tr_h = r, tr
 print("outcomes of 8 runs:", results)
 print({k: results.count(k) for k in ("right", "mirror", "lost")})
+assert results.count("lost") == 0 and 2 <= results.count("mirror") <= 6    # "in half of the runs" (of 8: 4 +- 2)
 
 # %%
 both = np.minimum(shares[0][:, 0], shares[0][:, 1])
@@ -276,25 +284,55 @@ axes[1].legend(fontsize=8)
 axes[1].grid(True, alpha=0.3)
 plt.tight_layout()
 plt.show()
+# the claims of the text below, checked
+e_a = position_error(tr_a.poses, run_k.poses)
+frac_inj = tr_a.n_injected / tr_a.n_particles
+localized = (e_a < 0.5) & (np.arange(len(e_a)) > KIDNAP + 10)
+assert frac_inj[KIDNAP:KIDNAP + 3].max() > 0.5                       # a new global localization
+assert localized.sum() > 10 and (frac_inj[localized] > 0.2).sum() >= 3  # bursts while localized
+assert (frac_inj[1:KIDNAP] > 0.2).sum() >= 2                         # ... and before the kidnapping
 
 # %% [markdown]
 # After the kidnapping the scans stop matching: `w_fast` falls far below
 # `w_slow` and augmented MCL replaces most of its particles by random ones —
-# it is, in effect, running a new global localization. The injection stays
-# high until the particles explain the scans about as well as before, that is,
-# until the robot is found; then `w_fast` recovers and the injection stops.
+# it is, in effect, running a new global localization (up to 70 % of the
+# particles per step right after the kidnapping).
+#
+# But look at the lower panel again: the injection does **not** stop once the
+# robot is found. While the filter is localized, it still replaces a quarter
+# to a half of its particles at some steps (around steps 29-37 and 46-49), and
+# it did so before the kidnapping too (steps 1, 10 and 13-14). The reason is
+# that `w_avg`, the likelihood of a whole scan, varies from one scan to the
+# next by much more than a few percent even when every particle is in the
+# right place: some views fit the map better than others, and clutter comes
+# and goes. With `α_fast = 0.5`, one scan that fits worse than the last few
+# pulls `w_fast` below `w_slow`, and `1 − w_fast / w_slow` reacts at once. In
+# a localized filter these random particles are wasted — they get low weights
+# and die at the next resampling, so the estimate suffers little here (the
+# small error spikes after step 20) — but with fewer particles the same bursts
+# can knock a tracked belief loose. A smaller `α_fast`, which averages over
+# several scans, makes the bursts rarer at the price of a slower reaction to a
+# real kidnapping; the widget at the end of this section lets you try.
 #
 # One run proves little. Eight kidnappings per filter (the recovery time in
 # steps after the kidnapping; "—" when the filter was still lost at the end of
 # the run, 35 steps later):
 
+# %% tags=["nbval-ignore-output", "remove-output"]
+# 24 kidnapping runs of 50 steps with 5000 particles: a progress bar while they run (not stored)
+trials = [(name, s) for name in FILTERS for s in range(8)]
+recovery = {(name, s): recovery_steps(*kidnap_trial(s, FILTERS[name]))
+            for name, s in metrics.progress(trials, desc="kidnappings")}
+
 # %%
 print("| filter | " + " | ".join(f"seed {s}" for s in range(8)) + " | recovered |")
 print("|---|" + "---|" * 9)
-for name, opts in FILTERS.items():
-    rec = [recovery_steps(*kidnap_trial(s, opts)) for s in range(8)]
+for name in FILTERS:
+    rec = [recovery[name, s] for s in range(8)]
     cells = ["—" if r is None else str(r) for r in rec]
     print(f"| {name} | " + " | ".join(cells) + f" | {sum(r is not None for r in rec)}/8 |")
+n_recovered = {name: sum(recovery[name, s] is not None for s in range(8)) for name in FILTERS}
+assert n_recovered["augmented MCL"] > n_recovered["5% injection"] >= n_recovered["plain MCL"]
 
 # %% [markdown]
 # Two settings of augmented MCL matter: `α_slow` must be slow enough that
@@ -303,6 +341,36 @@ for name, opts in FILTERS.items():
 # two (0.5). Because the search replaces nearly all particles at every step, it
 # behaves like global localization with the filter's particle count: with too
 # few particles it takes long, and a wrong look-alike place can win again.
+#
+# ### Try it: injection rate, `α_slow`, `α_fast` and the temperature
+#
+# The widget kidnaps a smaller filter (1000 particles, 36 steps, kidnapped at
+# step 12) and shows its error and the share of particles replaced at every
+# step. Things to try: make `α_fast` slower (0.2) and watch the bursts while
+# localized shrink — and the reaction to the kidnapping too; raise the
+# `temperature` (the `Augmented` option that averages the likelihood per beam
+# rather than per scan) to 36, the number of beams; switch augmented MCL off
+# and give a fixed injection of 0.05 instead; change the robot (seed) to see
+# how much a single run tells. An invalid setting (`α_slow ≥ α_fast`) is
+# reported instead of drawn. (In the HTML book the figure below the widget
+# shows the default setting.)
+
+# %% tags=["nbval-ignore-output"]
+from localize.widgets.recovery import kidnap_figure, kidnap_widget  # noqa: E402
+
+kidnap_widget()
+
+# %%
+fig = kidnap_figure()
+print(f"recovered {fig.summary['recovered']} steps after the kidnapping; "
+      f"injected while localized: {fig.summary['injected_localized']:.0%} of the particles per step")
+# the suggestions above, checked: a slower alpha_fast or a temperature of 36 calm the bursts
+from localize.widgets.recovery import kidnap_summary, kidnap_trial  # noqa: E402
+
+slow_fast, per_beam = kidnap_summary(*kidnap_trial(alpha_fast=0.2)), kidnap_summary(*kidnap_trial(temperature=36.0))
+assert max(slow_fast["injected_localized"], per_beam["injected_localized"]) < 0.5 * fig.summary["injected_localized"]
+assert slow_fast["recovered"] is None or slow_fast["recovered"] > fig.summary["recovered"]   # ... and react later
+fig
 #
 # ## KLD-sampling: as many particles as needed
 #
@@ -319,6 +387,19 @@ for name, opts in FILTERS.items():
 # over those bins stays below `ε` (a Wilson-Hilferty approximation to the
 # chi-square quantile). A spread-out belief fills many bins and asks for many
 # particles; a concentrated one fills a few.
+#
+# **Which particles are binned.** PR's table 8.4 draws a particle, moves it
+# with the motion model, weights it, and only then puts it in its bin: the
+# bins count the spread of the *predicted* belief. `localize`, like ROS AMCL,
+# bins the particles as they are *resampled*, before the next motion: the
+# bins count the spread of the *posterior*. We do it this way because our
+# filter keeps resampling, motion and weighting as separate vectorised steps
+# (PR's loop would have to move and weight the particles one at a time), and
+# because it is what AMCL users know. The difference is the motion noise of
+# one step: binned after the motion, a tracked belief looks a little wider
+# and gets a few more particles. With 0.5 m bins and steps of tens of
+# centimetres it rarely changes the count by much, but near the `n_min` floor
+# PR's version would sit slightly higher.
 
 # %%
 k = np.arange(1, 3001)
@@ -345,6 +426,9 @@ e_kld = position_error(tr_kld.poses, run_kld.poses)
 print("particles per step:", tr_kld.n_particles.tolist())
 print(f"final error {e_kld[-1]:.2f} m; beam evaluations: {tr_kld.beam_evaluations:,} "
       f"(a fixed 10 000 particles: {10_000 * ANGLES.size * len(run_kld):,})")
+work_share = tr_kld.beam_evaluations / (10_000 * ANGLES.size * len(run_kld))
+assert 0.09 < work_share < 0.16 and tr_kld.n_particles[0] == 10_000       # "about an eighth"
+assert max(tr_kld.n_particles[6:]) < 1000 and min(tr_kld.n_particles) == 300 and e_kld[-1] < 0.3
 
 # %%
 fig, axes = plt.subplots(1, 2, figsize=(12, 3.2))

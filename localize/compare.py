@@ -646,7 +646,7 @@ def _metrics(runs: list, name: str) -> FilterMetrics:
                          final >= FAIL_THRESHOLD, np.array(sec))
 
 
-def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None) -> MonteCarlo:
+def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None, progress: bool = False) -> MonteCarlo:
     """Run all ``filters`` on ``sc`` for every seed and collect the metrics.
 
     Parameters
@@ -657,6 +657,10 @@ def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None) -> Mo
     filters : sequence of names
     sensor_factory : callable, optional
         See :func:`run_filters`.
+    progress : bool
+        Show a tqdm progress bar over the seeds (:func:`localize.metrics.progress`;
+        in a notebook, keep it in a cell tagged ``nbval-ignore-output`` and
+        ``remove-output``).
 
     Returns
     -------
@@ -665,7 +669,8 @@ def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None) -> Mo
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ValueError("seeds must name at least one seed")
-    runs = [run_filters(sc, s, filters, sensor_factory=sensor_factory) for s in seeds]
+    runs = [run_filters(sc, s, filters, sensor_factory=sensor_factory)
+            for s in _metrics_mod.progress(seeds, progress, desc=f"scenario {sc.name}")]
     return MonteCarlo(sc, seeds, {n: _metrics(runs, n) for n in filters})
 
 

@@ -247,6 +247,13 @@ def predict(belief: ArrayLike, kernel: ArrayLike, offset: int | tuple[int, ...] 
     cval : float
         Belief assumed outside a bounded world (``mode="constant"``), >= 0.
 
+    Notes
+    -----
+    :func:`localize.histogram.move` (the 2-D tile world) has the opposite
+    defaults, bounded and renormalising: its world has edges, so belief is
+    lost at every move and must be renormalised. Here the default world is
+    cyclic and conserves mass, so the result is returned as is.
+
     Returns
     -------
     ndarray

@@ -175,15 +175,27 @@ def move(belief: ArrayLike, step, kernel: ArrayLike | None = None, fill: float =
         (:func:`noisy_step_kernel` builds one). ``None`` is a perfect move.
     fill : float
         Belief assumed on the tiles outside the world (>= 0). A perfect move
-        to the left leaves the rightmost column with ``fill``: a small value
-        there keeps every tile possible, so the filter can recover if the
-        robot did not move. Belief moved off the world is dropped.
+        to the left leaves the rightmost column with ``fill``. The default 0
+        is the exact Bayes prediction for a motion model you trust (and what a
+        hand calculation gives); a small positive value (the book uses 0.001)
+        keeps every tile possible, so the filter can recover if the robot in
+        fact did not move. Belief moved off the world is dropped.
     mode : {"constant", "wrap"}
         ``"constant"`` (default): the bounded world just described.
         ``"wrap"``: a cyclic (torus) world; ``fill`` is ignored.
     normalize : bool
         Renormalise the result (default). ``False`` returns the raw sum of
         total probability, to compare with a hand calculation.
+
+    Notes
+    -----
+    Why the defaults differ from :func:`localize.discrete.predict`: the tile
+    world has edges, so ``move`` is bounded by default and loses the belief
+    that leaves the floor; it therefore renormalises by default to return a
+    distribution. ``discrete.predict`` models chapter 1's hallway, cyclic by
+    default (``mode="wrap"``, as filterpy), where no mass is lost and nothing
+    needs renormalising; in its bounded mode it leaves the sum below one on
+    purpose so that the lost mass stays visible.
 
     Examples
     --------

@@ -14,10 +14,16 @@ degrees off, not 358.
   with Applications to Tracking and Navigation*, 2001, section 5.4);
 * :func:`convergence_step` — the first step after which the error stays
   below a threshold;
-* :func:`failure_rate` — the fraction of runs that end (or stay) lost.
+* :func:`failure_rate` — the fraction of runs that end (or stay) lost;
+* :func:`localized` and :func:`success_rate` — did a run end localized, and
+  in what fraction of seeded trials (with an optional progress bar,
+  :func:`progress`, for the slow experiments of the book).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -34,6 +40,9 @@ __all__ = [
     "convergence_step",
     "failure_rate",
     "summary",
+    "localized",
+    "success_rate",
+    "progress",
 ]
 
 
@@ -243,3 +252,95 @@ def summary(estimate: ArrayLike, truth: ArrayLike, threshold: float = 0.5,
         "final_heading_deg": float(np.degrees(he[-1])),
         "converged_at": convergence_step(ok, 0.5),
     }
+
+
+def progress(iterable: Iterable, enabled: bool = True, desc: str | None = None, total: int | None = None) -> Iterable:
+    """Wrap ``iterable`` in a tqdm progress bar when ``enabled``, else return it unchanged.
+
+    Uses ``tqdm.auto``: a widget bar in Jupyter, a text bar on stderr in a
+    terminal. The bar disappears when the loop ends (``leave=False``), so a
+    notebook keeps only the results. In a chapter, put a loop with a progress
+    bar in a cell tagged ``nbval-ignore-output`` and ``remove-output`` (the
+    bar's text holds timings) and print the results in the next cell.
+
+    Examples
+    --------
+    >>> list(progress(range(3), enabled=False))
+    [0, 1, 2]
+    >>> sum(progress(range(4), enabled=True, desc="adding"))   # a bar on stderr outside Jupyter
+    6
+    """
+    if not enabled:
+        return iterable
+    from tqdm.auto import tqdm
+
+    return tqdm(iterable, desc=desc, total=total, leave=False)
+
+
+def localized(estimate: ArrayLike, truth: ArrayLike, position_tol: float = 0.5, heading_tol: float = 0.2,
+              last: int = 5) -> bool:
+    """True when the estimate is within both tolerances of the truth at each of the ``last`` steps.
+
+    Parameters
+    ----------
+    estimate, truth : array_like, shape (T, 3)
+        Estimated and true poses of one run.
+    position_tol : float
+        Metres.
+    heading_tol : float
+        Radians (wrapped difference).
+    last : int
+        How many final steps must be within tolerance (1 <= last <= T).
+
+    Examples
+    --------
+    >>> truth = np.zeros((6, 3))
+    >>> est = truth + [0.1, 0.0, 0.05]
+    >>> localized(est, truth), localized(est + [0.6, 0, 0], truth)
+    (True, False)
+    """
+    est, tru = _pair(estimate, truth)
+    if est.ndim != 2:
+        raise ValueError(f"estimate and truth must be (T, 3) trajectories; got shape {est.shape}")
+    if not 1 <= int(last) <= est.shape[0]:
+        raise ValueError(f"last must be between 1 and the number of steps ({est.shape[0]}); got {last}")
+    if position_tol <= 0 or heading_tol <= 0:
+        raise ValueError(f"position_tol and heading_tol must be > 0; got {position_tol}, {heading_tol}")
+    k = int(last)
+    return bool(np.all(position_error(est[-k:], tru[-k:]) < position_tol)
+                and np.all(heading_error(est[-k:], tru[-k:]) < heading_tol))
+
+
+def success_rate(trial: Callable[[int], tuple[Any, Any]], seeds: Iterable[int], *, position_tol: float = 0.5,
+                 heading_tol: float = 0.2, last: int = 5, progress_bar: bool = False,
+                 desc: str | None = None) -> float:
+    """Fraction of seeded trials that end :func:`localized`.
+
+    Parameters
+    ----------
+    trial : callable
+        ``trial(seed) -> (estimated poses, true poses)``, both ``(T, 3)``; it
+        must draw all its randomness from generators seeded by ``seed``.
+    seeds : iterable of int
+        One trial per seed, e.g. ``range(20)``.
+    position_tol, heading_tol, last
+        As in :func:`localized`.
+    progress_bar : bool
+        Show a tqdm progress bar over the trials (see :func:`progress`).
+    desc : str, optional
+        Label of the progress bar.
+
+    Examples
+    --------
+    >>> def trial(seed):            # a "filter" that is right for even seeds only
+    ...     truth = np.zeros((5, 3))
+    ...     return truth + [seed % 2, 0.0, 0.0], truth
+    >>> success_rate(trial, range(10))
+    0.5
+    """
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("seeds must name at least one seed")
+    ok = [localized(*trial(s), position_tol=position_tol, heading_tol=heading_tol, last=last)
+          for s in progress(seeds, progress_bar, desc=desc)]
+    return float(np.mean(ok))

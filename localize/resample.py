@@ -361,7 +361,10 @@ def systematic(weights: ArrayLike, rng: np.random.Generator, n: int | None = Non
     """Systematic (low-variance) resampling: ``n`` pointers ``1/n`` apart.
 
     Same parameters and return value as :func:`multinomial`. Particle ``i``
-    gets either ``floor(n w_i)`` or ``ceil(n w_i)`` copies. Uses the same
+    gets either ``floor(n w_i)`` or ``ceil(n w_i)`` copies (in exact
+    arithmetic: a pointer that rounds onto a segment boundary counts for the
+    next particle, which can move one copy when ``r`` is within a few ulps of
+    such a boundary). Uses the same
     random number as :func:`systematic_loop` and returns the same indices.
 
     Notes

@@ -248,3 +248,30 @@ def test_dash_m_module_does_not_run_on_import():
     mod = importlib.import_module("localize.__main__")
     assert hasattr(mod, "main")
     assert Path(mod.__file__).name == "__main__.py"
+
+
+def test_animation_time_counts_in_the_total_and_titles_state_the_filters_particles(sim_files, tmp_path):
+    map_path, log_path, _ = sim_files
+    status, _, err = run_cli("run", "--map", map_path, "--log", log_path, "--particles", 1500, "--scans", "0:4",
+                             "--animate", "--frames", 2, "--quiet", "--out", tmp_path / "t")
+    assert status == 0, err
+    s = json.loads((tmp_path / "t" / "summary.json").read_text())
+    assert s["seconds_animation"] > 0
+    assert s["seconds_total"] >= s["seconds_animation"] + s["seconds_reading_files"]
+    from localize.plot.mcl import _frame_title
+
+    assert _frame_title(2, 1000, 1500) == "step 2: 1500 particles (1000 drawn)"   # the snapshots hold 1000
+
+
+def test_map_summary_counts_unknown_cells_apart():
+    g = maps.office(0.1)
+    data = np.array(g.data)
+    data[:10, :] = np.nan                                    # 10 rows of unknown cells
+    summary = cli.map_summary(localize_grid(data, g.resolution))
+    assert "2000 unknown" in summary and f"{int(np.sum(data > 0.5))} occupied" in summary
+
+
+def localize_grid(data, resolution):
+    from localize import OccupancyGrid
+
+    return OccupancyGrid(data, resolution)

@@ -228,3 +228,11 @@ def test_rates_differ_is_a_significance_test_of_two_proportions():
     rng = np.random.default_rng(1)
     a, b = rng.binomial(50, 0.3, 5000) / 50, rng.binomial(50, 0.3, 5000) / 50
     assert np.mean([C.rates_differ(x, y, 50) for x, y in zip(a, b)]) < 0.01
+
+
+def test_monte_carlo_with_a_progress_bar_gives_the_same_metrics(capsys):
+    sc = C.scenario("tracking", n_steps=10, n_particles=100)
+    quiet = C.monte_carlo(sc, range(2), filters=("EKF",))
+    shown = C.monte_carlo(sc, range(2), filters=("EKF",), progress=True)
+    assert np.array_equal(quiet.metrics["EKF"].pos_err, shown.metrics["EKF"].pos_err)
+    assert "scenario tracking" in capsys.readouterr().err

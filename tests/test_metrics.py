@@ -92,3 +92,43 @@ def test_summary():
     assert s["converged_at"] == 2                # step 1 has the position but not the heading
     assert s["final_position"] == pytest.approx(0.1)
     assert s["rmse_position"] == pytest.approx(np.sqrt((25 + 4 * 0.01) / 5))
+
+
+# --- localized / success_rate / progress (the book's slow experiments) ---
+
+def test_localized_needs_every_one_of_the_last_steps_and_wraps_headings():
+    truth = np.zeros((6, 3))
+    est = truth.copy()
+    est[:, 2] = np.pi - 0.05            # heading pi - 0.05 against truth -pi + 0.05 ...
+    tru = truth.copy()
+    tru[:, 2] = -np.pi + 0.05           # ... is 0.1 rad off once wrapped
+    assert m.localized(est, tru)
+    est2 = est.copy()
+    est2[-3, 0] = 0.6                   # one of the last five steps is 0.6 m off
+    assert not m.localized(est2, tru)
+    assert m.localized(est2, tru, last=2)
+
+
+@pytest.mark.parametrize("kwargs, match", [({"last": 0}, "last"), ({"last": 7}, "last"),
+                                           ({"position_tol": 0.0}, "position_tol")])
+def test_localized_rejects_bad_options(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        m.localized(np.zeros((6, 3)), np.zeros((6, 3)), **kwargs)
+
+
+def test_success_rate_counts_trials_with_and_without_a_progress_bar(capsys):
+    def trial(seed):
+        truth = np.zeros((5, 3))
+        return truth + [0.1 * seed, 0.0, 0.0], truth        # seeds 0-4 within 0.5 m, 5-9 not
+
+    assert m.success_rate(trial, range(10)) == 0.5
+    assert m.success_rate(trial, range(10), progress_bar=True, desc="trials") == 0.5
+    assert "trials" in capsys.readouterr().err               # the bar went to stderr, not stdout
+    with pytest.raises(ValueError, match="seeds"):
+        m.success_rate(trial, [])
+
+
+def test_progress_is_transparent():
+    items = [3, 1, 2]
+    assert m.progress(items, enabled=False) is items
+    assert list(m.progress(items, enabled=True)) == items

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 import numpy as np
+from matplotlib.ticker import FuncFormatter
 from numpy.typing import ArrayLike
 
 from ..geometry import as_poses
@@ -167,10 +168,22 @@ def snapshot_strip(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLike |
     return fig
 
 
+def _frame_title(step: int, drawn: int, n_particles: int | dict | None) -> str:
+    """'step 3: 2000 particles (1000 drawn)' when a subsample is drawn, else 'step 3: 2000 particles'."""
+    n = n_particles.get(step) if isinstance(n_particles, dict) else n_particles
+    if n is None or int(n) == drawn:
+        return f"step {step}: {drawn} particles"
+    return f"step {step}: {int(n)} particles ({drawn} drawn)"
+
+
 def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLike | None = None,
                       estimates: ArrayLike | None = None, interval: int = 250, figsize=(6.0, 3.8),
-                      size: float = 2.0, dpi: int = 72):
+                      size: float = 2.0, dpi: int = 72, n_particles: int | dict | None = None):
     """A matplotlib animation of the particle cloud, one frame per snapshot.
+
+    ``n_particles`` is the filter's particle count for the titles (an int, or
+    a dict step -> count) when the snapshots hold a subsample; by default the
+    title counts the particles drawn, and says "drawn" if fewer than stated.
 
     Embed it in a notebook with ``IPython.display.HTML(localize.plot.animation_html(anim))``;
     ``dpi`` sets the frames' resolution (and so the size of the embedded HTML).
@@ -185,6 +198,8 @@ def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLik
     >>> anim = animate_snapshots(office(), snaps, figsize=(3, 2))
     >>> "<script" in anim.to_jshtml(fps=4)
     True
+    >>> _frame_title(3, 1000, 2000), _frame_title(3, 50, None)
+    ('step 3: 2000 particles (1000 drawn)', 'step 3: 50 particles')
     >>> plt.close("all")
     """
     import matplotlib.pyplot as plt
@@ -202,7 +217,7 @@ def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLik
         k = steps[i]
         p, w = snapshots[k]
         draw_belief(grid, p, w, None if tp is None else tp[k], None if es is None else es[k], ax=ax,
-                    title=f"step {k}: {len(p)} particles", size=size)
+                    title=_frame_title(k, len(p), n_particles), size=size)
         return ax.get_children()
 
     anim = FuncAnimation(fig, frame, frames=len(steps), interval=interval, blit=False)
@@ -223,6 +238,8 @@ def plot_errors(estimates: ArrayLike, truth: ArrayLike, ax=None, label: str | No
     >>> ax = plot_errors(e, t, kidnap_steps=[2])
     >>> ax.get_ylabel()
     'position error [m]'
+    >>> [t.get_text() for t in ax.get_yticklabels()]     # no negative ticks on an error axis
+    ['0', '0.1', '1']
     >>> plt.close("all")
     """
     _, ax = new_axes(ax, figsize=(7, 3))
@@ -238,7 +255,15 @@ def plot_errors(estimates: ArrayLike, truth: ArrayLike, ax=None, label: str | No
         ax.axvline(k, color="k", ls=":", lw=1)
     ax.set_xlabel("step")
     ax.set_ylabel("position error [m]")
+    # errors are >= 0: linear from 0 to 0.1 m, logarithmic above; no negative ticks, plain numbers
     ax.set_yscale("symlog", linthresh=0.1)
+    top = max(1.0, float(np.nanmax(pe)) * 1.5) if pe.size and np.isfinite(pe).any() else 1.0
+    if len(ax.lines) > 1 + len(kidnap_steps):          # more errors drawn on these axes before: keep them in view
+        top = max(top, ax.get_ylim()[1])
+    ax.set_ylim(0.0, top)
+    ticks = [0.0] + [10.0**k for k in range(-1, int(np.floor(np.log10(top))) + 1)]
+    ax.set_yticks(ticks)
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.grid(True, alpha=0.3)
     return ax
 

@@ -34,10 +34,12 @@ __all__ = [
 ]
 
 #: Three noise settings in the spirit of PR figure 5.9: typical, large
-#: rotational noise, large translational noise (alpha1..alpha4).
+#: rotational noise (alpha1 and alpha2 ten times larger: with a drive of a
+#: metre or more the sideways spread then dwarfs the spread along the way, the
+#: banana), large translational noise (alpha3 ten times larger); alpha1..alpha4.
 PR_FIG_5_9_ALPHAS: tuple[tuple[float, float, float, float], ...] = (
     (0.02, 0.005, 0.02, 0.01),
-    (0.2, 0.005, 0.02, 0.01),
+    (0.2, 0.05, 0.02, 0.01),
     (0.02, 0.005, 0.2, 0.01),
 )
 

@@ -108,6 +108,10 @@ def plot_scan_on_map(grid: OccupancyGrid, pose: ArrayLike, angles: ArrayLike, me
     if zoom:
         ax.set_xlim(p[0] - zoom, p[0] + zoom)
         ax.set_ylim(p[1] - zoom, p[1] + zoom)
+    else:                                   # the map's extent, whatever the rays do: redraws do not rescale
+        xmin, xmax, ymin, ymax = grid.extent
+        ax.set_xlim(xmin, xmax)
+        ax.set_ylim(ymin, ymax)
     if expected is not None or measured is not None:
         ax.legend(fontsize=8, loc="upper right")
     return ax
@@ -133,6 +137,11 @@ def plot_ranges(angles: ArrayLike, measured: ArrayLike | None = None, expected: 
         ax.axhline(max_range, color="tab:red", ls="--", lw=1, label="max range")
     ax.set_xlabel("beam angle [deg]")
     ax.set_ylabel("range [m]")
+    if max_range is not None:                # fixed limits: redraws with other ranges do not rescale
+        ax.set_ylim(0.0, 1.08 * float(max_range))
+    if deg.size:
+        pad = 0.03 * max(float(np.ptp(deg)), 1.0)
+        ax.set_xlim(float(deg.min()) - pad, float(deg.max()) + pad)
     ax.legend(fontsize=8)
     return ax
 

@@ -23,6 +23,7 @@ from ..compare import FAIL_THRESHOLD, run_filters, scenario
 from ..metrics import position_error
 from ..plot import draw_poses
 from ..plot.ekf import FILTER_COLORS, draw_gaussian_belief, draw_landmarks
+from . import with_hint
 
 __all__ = ["noise_runs", "noise_figure", "noise_widget", "DEMOS", "DEMO_VARIANTS"]
 
@@ -170,7 +171,7 @@ def noise_widget(**defaults: Any):
 
     out = W.interactive_output(show, dict(heading_noise=hn, sigma_bearing=sb, sense_every=se, n_particles=n,
                                           seed=seed, anonymous=anon))
-    return W.VBox([W.HBox([hn, sb, se]), W.HBox([n, seed, anon]), out])
+    return with_hint(W.VBox([W.HBox([hn, sb, se]), W.HBox([n, seed, anon]), out]))
 
 
 #: Seeds and steps per redraw of :func:`noise_widget` (small, so that a redraw stays under 100 ms).

@@ -20,6 +20,7 @@ from .. import discrete
 from .. import histogram as hist
 from ..maps import hallway, tile_world
 from ..plot.histogram import draw_bars, draw_tiles
+from . import with_hint
 
 __all__ = ["hallway_run", "hallway_figure", "tile_world_run", "tile_world_figure", "hallway_app",
            "tile_world_app", "TILE_START", "TILE_PATH", "DEMOS", "DEMO_VARIANTS"]
@@ -179,13 +180,13 @@ def hallway_app():
         plt.show()
         plt.close(fig)
 
-    return interactive(
+    return with_hint(interactive(
         show,
         p_hit=FloatSlider(value=0.75, min=0.5, max=1.0, step=0.05, description="sensor right"),
         motion_noise=FloatSlider(value=0.2, min=0.0, max=0.9, step=0.05, description="motion noise"),
         n_steps=IntSlider(value=3, min=1, max=20, description="cycles"),
         cyclic=Checkbox(value=True, description="cyclic world"),
-    )
+    ))
 
 
 class _TileStepper:
@@ -240,7 +241,7 @@ def tile_world_app():
     app = VBox([HBox([p_hit, noise]), HBox([step_b, reset_b]), out])
     app.stepper = state  # for tests
     app.redraw = redraw
-    return app
+    return with_hint(app)
 
 
 DEMOS = {

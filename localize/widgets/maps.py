@@ -11,6 +11,7 @@ import numpy as np
 from ..geometry import transform_points
 from ..grid import OccupancyGrid
 from ..plot import draw_map, draw_robot
+from . import with_hint
 
 __all__ = ["robot_on_map_figure", "robot_on_map", "DEMOS"]
 
@@ -60,12 +61,12 @@ def robot_on_map(grid: OccupancyGrid, x: float = 10.0, y: float = 5.5, theta_deg
         robot_on_map_figure(grid, x, y, heading)
         plt.show()
 
-    return interactive(
+    return with_hint(interactive(
         show,
         x=FloatSlider(value=x, min=xmin, max=xmax - res, step=res, description="x [m]"),
         y=FloatSlider(value=y, min=ymin, max=ymax - res, step=res, description="y [m]"),
         heading=FloatSlider(value=theta_deg, min=-180.0, max=179.0, step=1.0, description="heading [°]"),
-    )
+    ))
 
 
 def _demo():

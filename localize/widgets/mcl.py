@@ -21,6 +21,7 @@ from ..mcl import MCL, OdometryMotion, run_mcl
 from ..metrics import heading_error, position_error
 from ..plot import draw_map, draw_robot
 from ..plot.mcl import draw_particles
+from . import with_hint
 
 __all__ = ["simulate", "mcl_run_figure", "mcl_widget_figure", "mcl_player", "DEMOS", "DEMO_VARIANTS"]
 
@@ -213,7 +214,7 @@ def mcl_player(n_steps: int = 40, **defaults: Any):
                                           threshold=threshold, alpha_scale=alpha_scale, sigma_hit=sigma_hit))
     controls = W.VBox([W.HBox([play, step]), W.HBox([n_particles, resampler]),
                        W.HBox([threshold, alpha_scale, sigma_hit])])
-    return W.VBox([controls, out])
+    return with_hint(W.VBox([controls, out]))
 
 
 def _demo(**kw):

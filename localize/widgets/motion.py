@@ -19,6 +19,7 @@ from ..motion import (
     sample_velocity,
     velocity_pdf,
 )
+from . import with_hint
 
 __all__ = [
     "DEMOS",
@@ -258,7 +259,7 @@ def odometry_widget(n: int = 500, **kwargs):
 
     box = _slider_box(sliders, draw, draw(**{k: s.value for k, s in sliders.items()}))
     box.view = view
-    return box
+    return with_hint(box)
 
 
 class VelocityCloudView:
@@ -361,7 +362,7 @@ def velocity_widget(n: int = 500, **kwargs):
 
     box = _slider_box(sliders, draw, draw(**{k: s.value for k, s in sliders.items()}))
     box.view = view
-    return box
+    return with_hint(box)
 
 
 #: Zero-argument demos of each widget's callback at its default parameters

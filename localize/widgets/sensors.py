@@ -19,9 +19,10 @@ from numpy.typing import ArrayLike
 
 from ..grid import OccupancyGrid
 from ..sensors import BeamModel
+from . import with_hint
 
 __all__ = ["normalise_weights", "pseudo_density_figure", "beam_density_widget", "pose_scan_figure",
-           "pose_scan_widget", "DEMOS", "DEMO_VARIANTS"]
+           "pose_scan_widget", "pose_scan_start", "DEMOS", "DEMO_VARIANTS"]
 
 
 def normalise_weights(z_hit: float, z_short: float, z_max: float, z_rand: float) -> tuple[float, float, float, float]:
@@ -89,9 +90,10 @@ def beam_density_widget(max_range: float = 10.0):
 
     def slider(value, lo, hi, step, desc):
         return w.FloatSlider(value=value, min=lo, max=hi, step=step, description=desc,
-                             continuous_update=False, readout_format=".2f")
+                             continuous_update=False, readout_format=".2f",
+                             style={"description_width": "initial"})
 
-    return w.interactive(
+    return with_hint(w.interactive(
         pseudo_density_figure,
         z_hit=slider(0.7, 0.0, 1.0, 0.05, "z_hit"),
         z_short=slider(0.1, 0.0, 1.0, 0.05, "z_short"),
@@ -101,7 +103,7 @@ def beam_density_widget(max_range: float = 10.0):
         lambda_short=slider(0.5, 0.05, 3.0, 0.05, "lambda_short"),
         z_expected=slider(5.0, 0.5, max_range, 0.25, "z*"),
         max_range=w.fixed(float(max_range)),
-    )
+    ))
 
 
 def pose_scan_figure(grid: OccupancyGrid, model, angles: ArrayLike, measured: ArrayLike, x: float, y: float,
@@ -166,23 +168,63 @@ def pose_scan_widget(grid: OccupancyGrid, model, angles: ArrayLike, measured: Ar
     ...     wid = pose_scan_widget(g, LikelihoodField(g, 8.0), [0.0], [1.0], start=(6.0, 5.5, 0.0))
     >>> [c.description for c in wid.children[:3]]
     ['x [m]', 'y [m]', 'heading [deg]']
+    >>> [c.value for c in wid.children[:3]]              # on the slider steps: cell centres, whole degrees
+    [6.05, 5.45, 0.0]
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
     import ipywidgets as w
 
-    xmin, xmax, ymin, ymax = grid.extent
-    step = max(grid.resolution, 0.05)
-    return w.interactive(
+    (x0, x1, step), (y0, y1, _), (t0, t1, t_step) = _pose_slider_ranges(grid)
+    x, y, theta_deg = pose_scan_start(grid, start)
+    style = {"description_width": "initial"}
+    return with_hint(w.interactive(
         pose_scan_figure,
         grid=w.fixed(grid), model=w.fixed(model), angles=w.fixed(np.asarray(angles)),
         measured=w.fixed(np.asarray(measured)), reference_pose=w.fixed(reference_pose),
-        x=w.FloatSlider(value=float(start[0]), min=xmin, max=xmax - 1e-6, step=step, description="x [m]",
-                        continuous_update=False),
-        y=w.FloatSlider(value=float(start[1]), min=ymin, max=ymax - 1e-6, step=step, description="y [m]",
-                        continuous_update=False),
-        theta_deg=w.FloatSlider(value=float(np.degrees(start[2])), min=-180, max=180, step=2,
-                                description="heading [deg]", continuous_update=False),
-    )
+        x=w.FloatSlider(value=x, min=x0, max=x1, step=step, description="x [m]",
+                        continuous_update=False, readout_format=".2f", style=style),
+        y=w.FloatSlider(value=y, min=y0, max=y1, step=step, description="y [m]",
+                        continuous_update=False, readout_format=".2f", style=style),
+        theta_deg=w.FloatSlider(value=theta_deg, min=t0, max=t1, step=t_step,
+                                description="heading [deg]", continuous_update=False, readout_format=".0f",
+                                style=style),
+    ))
+
+
+def _pose_slider_ranges(grid: OccupancyGrid):
+    """(min, max, step) of the x, y and heading sliders: x and y on cell *centres*, heading on whole 2 degrees.
+
+    Cell centres, not cell edges: a pose exactly on an edge would fall into one
+    cell or the other depending on the last bit of the slider's value, so that
+    returning to the same readout could give another figure.
+    """
+    xmin, xmax, ymin, ymax = grid.extent
+    r = grid.resolution
+    step = r * max(1, int(np.ceil(0.05 / r - 1e-9)))    # at least 5 cm, a whole number of cells
+    cols = int(np.floor((xmax - xmin - r / 2) / step + 1e-9))
+    rows = int(np.floor((ymax - ymin - r / 2) / step + 1e-9))
+    return ((xmin + r / 2, xmin + r / 2 + cols * step, step), (ymin + r / 2, ymin + r / 2 + rows * step, step),
+            (-180.0, 180.0, 2.0))
+
+
+def pose_scan_start(grid: OccupancyGrid, start: ArrayLike) -> tuple[float, float, float]:
+    """The slider position nearest to ``start`` = (x, y, theta in radians): ``(x, y, theta_deg)`` on the sliders' steps.
+
+    Use it for the static figure after the widget, so that the figure shows
+    exactly the widget's starting position.
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> pose_scan_start(office(), (6.6000000000000005, 5.6000000000000005, 0.3))
+    (6.65, 5.65, 18.0)
+    """
+    start = np.asarray(start, dtype=float).reshape(3)
+    out = []
+    for v, (lo, hi, st) in zip((start[0], start[1], np.degrees(start[2])), _pose_slider_ranges(grid)):
+        k = np.clip(np.round((v - lo) / st), 0, round((hi - lo) / st))
+        out.append(round(float(lo + k * st), 6))
+    return tuple(out)
 
 
 def _pose_scan_demo(dx: float = 0.4):
