@@ -435,12 +435,14 @@ variants = {
     "temper 0.1, 12 beams": BeamModel(grid, MAX_RANGE, sigma_hit=0.2, temper=0.1, max_beams=12, caster=beam.caster),
 }
 
-# %% tags=["solution", "hide-cell", "nbval-ignore-output", "remove-output"]
+# %% tags=["solution", "hide-cell", "nbval-ignore-output", "remove-output"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 # 120 global localizations: a progress bar while they run
 variant_rates = {label: [success_rate(n, model, progress=True) for n in (1000, 3000)]
                  for label, model in variants.items()}
 
-# %% tags=["solution", "hide-cell"]
+# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# Solution (click to show)
 for label, rates_v in variant_rates.items():
     print(f"{label:40s}", [f"{r:.0%}" for r in rates_v])
 # With 20 runs one run is 5%, so only differences of several runs mean something. At 3000 particles the
