@@ -262,7 +262,7 @@ plt.show()
 # The code exercises of the chapters come with such self-checks, and the
 # homework notebook (`book/homework/homework.ipynb`) collects them.
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 def world_to_cell(points, origin, resolution):
     """(row, column) of the cell holding each (x, y) point."""

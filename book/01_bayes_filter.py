@@ -393,7 +393,7 @@ plt.show()
 #    5, 10 and 15 cycles, on average? How does this change for a sensor that is
 #    right 90 % of the time?
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 1
 w5 = np.array([1, 0, 0, 1, 0])
@@ -414,7 +414,7 @@ print("(b)", discrete.predict(b, [0.1, 0.8, 0.1], offset=1).round(4))
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 2: stopping at the ends of a bounded hallway
 def predict_stop(belief, kernel, offset):
@@ -432,7 +432,7 @@ b[17:] = [0.2, 0.3, 0.5]
 moved = predict_stop(b, kernel, 2)
 print(moved[15:].round(3), "sum", round(float(moved.sum()), 6))
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 3: belief near the truth after t cycles, averaged over 200 runs
 def belief_near_truth(p_sensor, rng, checkpoints=(5, 10, 15)):

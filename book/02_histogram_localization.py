@@ -463,7 +463,7 @@ plt.show()
 #    does it end on the true tile, and how many cell updates does it use,
 #    compared with the full grid?
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 1
 w = np.array([["red", "green", "green", "red"]])
@@ -482,7 +482,7 @@ print("after moving :", histogram.move(b, "right", fill=0.0).round(3))
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 2
 def sense_confusion(belief, world, z, confusion):
@@ -496,7 +496,7 @@ u = discrete.uniform(world.shape)
 assert np.allclose(sense_confusion(u, world, "blue", conf), histogram.sense(u, world, "blue", 0.85, 0.15))
 print("sense_confusion agrees with histogram.sense")
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 3
 def trial(seed, threshold):

@@ -398,7 +398,7 @@ fig
 #    the scans). How many steps does the grid filter need to find the robot
 #    again? What does the `min_sigma_xy` floor have to do with it?
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 1
 K16 = 16
@@ -417,7 +417,7 @@ print("bin width 30° (12 bins): 45° / 30° =", 45 / 30, "-> not a whole number
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 2
 def marginal_heading_plot(loc, ax):
@@ -437,7 +437,7 @@ for t in range(17):
 fig.tight_layout()
 plt.show()
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 3: kidnapping after step 10
 kid_truth = truth.copy()
@@ -481,7 +481,7 @@ for floor in [0.5, 2.0]:
 #    which tries the classic mistakes: the beam offset forgotten or applied the
 #    wrong way, and a product of 360 beam likelihoods that underflows.
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 from localize import check  # noqa: E402
 

@@ -739,7 +739,7 @@ velocity_cloud_figure()
 #    $\alpha_1$ and $\alpha_3$ from the spread of the end poses, and compare
 #    with the hidden values.
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 1
 r1, t, r2 = motion.odometry_to_control([2, 1, 0], [3, 2, np.pi / 2])
@@ -768,7 +768,7 @@ print("(c) noise-free end pose", end.round(4), " density there", round(float(den
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 2
 def sample_forward_turn(poses, d, sigma_d, sigma_heading, sigma_final, rng):
@@ -805,7 +805,7 @@ print("max |cov difference|", float(np.abs(np.cov(ours.T) - np.cov(theirs.T)).ma
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 3
 rng_robot = np.random.default_rng(99)

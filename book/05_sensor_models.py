@@ -840,7 +840,7 @@ plt.show()
 #    ESS as 10 beams. What does that say about how many "independent" beams
 #    the 61 are worth?
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 1
 m = BeamModel(None, 10.0, 0.8, 0.1, 0.05, 0.05, sigma_hit=0.2, lambda_short=0.5)
@@ -866,7 +866,7 @@ print(f"    plain Gaussian: drops by {float(g.beam_log_pdf(3.0, [[3.0]])[0, 0] -
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 2
 def plain_march(grid, x, y, angle, max_range):
@@ -905,7 +905,7 @@ print(f"plain marcher off by more than one cell on {np.mean(np.abs(plain - exact
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 3
 scans = world_beam.sample(np.repeat(true_pose[None], 5, axis=0), angles, np.random.default_rng(31))

@@ -912,7 +912,7 @@ assert 5_000 < n_95 < 15_000
 #    multinomial instead of systematic resampling. What do you expect, and what
 #    do you see?
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 1
 w_ex = np.array([0.1, 0.2, 0.3, 0.4])
@@ -944,7 +944,7 @@ print(f"(c) multinomial: mean {4 * 0.4:.1f}, variance {4 * 0.4 * 0.6:.2f};"
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 2
 def residual_fixed(weights, rng):
@@ -967,7 +967,7 @@ z = np.abs(mean - 4 * w4) / np.sqrt(np.maximum(var, 1 / 20_000) / 20_000)
 print("mean offspring", mean.round(3), " expected", 4 * w4, " z-scores", z.round(2))
 print("unbiased (all z < 5):", bool(np.all(z < 5)))
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 3
 def tv_at(n, seed, resampler, k=10):

@@ -398,7 +398,7 @@ plt.show()
 # success: tempering or the number of beams? Explain with the overconfidence
 # argument.
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 1
 lw = np.array([-1002.0, -1000.0, -1003.0])
@@ -406,7 +406,7 @@ m = lw.max()
 w = np.exp(lw - m) / np.exp(lw - m).sum()
 print("weights:", w.round(4), " naive exp:", np.exp(lw), " N_eff:", round(1 / np.sum(w**2), 3))
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 2: the textbook loop with localize's parts
 from localize.resample import systematic  # noqa: E402
@@ -426,7 +426,7 @@ for k in range(len(run)):
 mine = estimate_pose(parts, np.exp(logw)).pose
 print("my final estimate:", mine.round(2), " MCL:", trace.poses[-1].round(2), " truth:", run.poses[-1].round(2))
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 3: tempering versus the number of beams (1000 and 3000 particles, 20 runs each)
 variants = {
@@ -435,13 +435,13 @@ variants = {
     "temper 0.1, 12 beams": BeamModel(grid, MAX_RANGE, sigma_hit=0.2, temper=0.1, max_beams=12, caster=beam.caster),
 }
 
-# %% tags=["solution", "hide-cell", "nbval-ignore-output", "remove-output"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell", "nbval-ignore-output", "remove-output"]
 # Solution (click to show)
 # 120 global localizations: a progress bar while they run
 variant_rates = {label: [success_rate(n, model, progress=True) for n in (1000, 3000)]
                  for label, model in variants.items()}
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 for label, rates_v in variant_rates.items():
     print(f"{label:40s}", [f"{r:.0%}" for r in rates_v])

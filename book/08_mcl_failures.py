@@ -484,7 +484,7 @@ plt.show()
 # range, so that the tie-breaking box is seen only near its corner, and
 # compare plain MCL with augmented MCL.)
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 1
 w_slow = w_fast = 1.0
@@ -493,7 +493,7 @@ for step in (1, 2, 3):
     w_fast += 0.5 * (0.01 - w_fast)
     print(f"step {step}: w_slow = {w_slow:.4f}, w_fast = {w_fast:.4f}, p_inject = {max(0, 1 - w_fast / w_slow):.3f}")
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 2
 from localize.kld import bin_keys, kld_sample_size  # noqa: E402
@@ -510,7 +510,7 @@ for n, key in enumerate(keys.tolist(), start=1):
         break
 print("loop:", n_needed, " localize:", kld_sample_size(draws, (0.5, 0.5, np.radians(10)), n_min=300))
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 3
 final_share = []
@@ -534,7 +534,7 @@ print("share of the true mode after 40 steps:", np.round(final_share, 2))
 # `check.injection(injection)`. Why must $w_\text{avg}$ average the raw
 # likelihoods and not the normalised weights?
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 from localize import check  # noqa: E402
 

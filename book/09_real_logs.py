@@ -605,7 +605,7 @@ print("within 0.5 m of the truth from scan", k0, f"| median APE afterwards {np.m
 # use it for study and do not redistribute it. The Willow Garage map used in the
 # tests ships with ROS under the BSD licence. None of these files is part of this
 # repository; `localize demo` runs without any of them.
-
+#
 # ## Tuning the models from your robot's data
 #
 # The defaults of `localize` are starting points. Three groups of numbers should
@@ -754,7 +754,7 @@ fig
 # matters more on the real Intel log (the text below the solution gives
 # numbers measured there).
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Solution 1. Text line 41 is x cell 40; values 101..103 are y cells 100..102.
 x_cell, y_cells = 40, np.array([100, 101, 102])
@@ -766,7 +766,7 @@ print("stored occupancy:", occ.round(2).tolist(), "at grid.data[i=y, j=x] =", [(
 print("beam 46 points at", -90 + 45, "degrees, i.e. 45 degrees to the robot's right")
 
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Solution 2.
 def read_xy_log(path):
@@ -802,7 +802,7 @@ try:
 except io.FormatError as e:
     print("rejected:", hide(e))
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Solution 3.
 for temper in (1.0, 0.05):
@@ -840,7 +840,7 @@ for temper in (1.0, 0.05):
 # `check.map_image(map_image)`; it tries the picture upside down, white read as
 # occupied, `negate` ignored and unknown cells made free.
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 from localize import check  # noqa: E402
 

@@ -601,7 +601,7 @@ plt.show()
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 pose, m = np.array([1.0, 1.0, np.pi / 2]), np.array([4.0, 5.0])
 H = landmark_jacobian(pose, m)
@@ -623,7 +623,7 @@ print("S =\n", S.round(4) + 0.0)
 #
 # </details>
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 class GatedEKF(EKFLocalizer):
     """EKF localization that skips sightings outside the 99% innovation gate."""
@@ -672,7 +672,7 @@ print(f"gated EKF lost after the kidnapping in {lost} of 10 seeds")
 #
 # </details>
 
-# %% tags=["solution", "hide-cell", "nbval-ignore-output"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell", "nbval-ignore-output"]
 # Solution (click to show)
 rates = {}
 for n in (100, 300, 1000):
@@ -697,7 +697,7 @@ assert mc.metrics["EKF"].failure_rate <= C.rate_tolerance(10, 0.0)      # identi
 # `check.ekf_update(ekf_update)`; one of its cases sees a landmark behind the
 # robot, where the bearing innovation crosses $\pm\pi$.
 
-# %% tags=["solution", "hide-cell"] jupyter={"source_hidden": true, "outputs_hidden": true}
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 from localize import check  # noqa: E402
 

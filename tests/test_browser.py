@@ -345,7 +345,15 @@ _JS_RUN_ALL_FINISHED = """() => {
         .some(e => /^Python.*\\|\\s*Idle\\s*$/.test(e.textContent.trim()));
     const prompts = [...document.querySelectorAll('.jp-Notebook .jp-CodeCell .jp-InputPrompt')]
         .map(e => e.textContent.trim());
-    const done = prompts.length > 0 && prompts.every(p => /^\\[\\d+\\]:$/.test(p));
+    // every code cell has run: read from the notebook model, because a cell whose source is
+    // collapsed (the hidden solutions) shows no prompt
+    const nb = window.jupyterapp && window.jupyterapp.shell.currentWidget;
+    const cells = nb && nb.content && nb.content.model ? nb.content.model.cells : null;
+    let done = cells !== null && cells.length > 0;
+    for (let i = 0; cells !== null && i < cells.length; i++) {
+        const c = cells.get(i);
+        if (c.type === 'code' && (c.executionCount === null || c.executionCount === undefined)) done = false;
+    }
     const err = document.querySelector(".jp-Notebook [data-mime-type='application/vnd.jupyter.stderr']");
     return idle && !prompts.includes('[*]:') && (done || err !== null);
 }"""
@@ -435,7 +443,8 @@ def open_and_run_all(page, rel: str) -> None:
     stderr = page.locator(".jp-Notebook [data-mime-type='application/vnd.jupyter.stderr']").all_inner_texts()
     assert not stderr, f"{rel}: cells wrote to stderr (error or warning):\n" + "\n---\n".join(stderr)[:4000]
     prompts = page.locator(".jp-Notebook .jp-CodeCell .jp-InputPrompt").all_inner_texts()
-    assert all(p.strip().startswith("[") and p.strip()[1:-2].isdigit() for p in prompts), prompts
+    shown = [p for p in prompts if p.strip()]  # a cell with collapsed source (a hidden solution) shows none
+    assert shown and all(p.strip().startswith("[") and p.strip()[1:-2].isdigit() for p in shown), prompts
 
 
 def slider_index(page, label: str | None) -> int:
