@@ -822,10 +822,11 @@ for n, seed in progress([(n, s) for n in N_TRY for s in SEEDS_2D], desc="global 
                                           - r.poses[-1, :2])))
 
 # %%
-lost = {n: np.mean([final_err[n, s] > 0.5 for s in SEEDS_2D]) for n in N_TRY}
+# counts, not percentages: with 8 runs a rate is a count (and 1/8 = 12.5% sits on a rounding tie)
+lost = {n: int(sum(final_err[n, s] > 0.5 for s in SEEDS_2D)) for n in N_TRY}
 for n in N_TRY:
-    print(f"{n:5d} particles: lost in {lost[n]:4.0%} of {len(SEEDS_2D)} runs")
-assert lost[250] >= lost[1000] >= lost[4000] and lost[250] - lost[4000] >= 0.5
+    print(f"{n:5d} particles: lost in {lost[n]} of {len(SEEDS_2D)} runs")
+assert lost[250] >= lost[1000] >= lost[4000] and lost[250] - lost[4000] >= len(SEEDS_2D) / 2
 
 # %% [markdown]
 # ### How many particles?
