@@ -148,7 +148,12 @@ def make_sensor(kind: str, grid: OccupancyGrid, max_range: float, sensor_offset:
 
 @dataclass
 class RunResult:
-    """What :func:`localize_log` returns: per-scan estimates and run statistics."""
+    """What :func:`localize_log` returns: per-scan estimates, the honest state and run statistics.
+
+    ``state[k]`` is ``searching``, ``localized`` or ``lost`` (see
+    :class:`localize.mcl.StateRules`); ``trace`` is the run driver's full record
+    (:class:`localize.mcl.RunTrace`).
+    """
 
     times: NDArray[np.float64]
     estimates: NDArray[np.float64]
@@ -157,6 +162,8 @@ class RunResult:
     updated: NDArray[np.bool_]
     seconds: float
     snapshots: dict = field(default_factory=dict)
+    state: NDArray[np.str_] | None = None
+    trace: Any = None
 
     @property
     def seconds_per_scan(self) -> float:
@@ -183,8 +190,16 @@ def localize_log(
     snapshot_particles: int = 1000,
     progress: Progress | None = None,
     sensor_params: dict | None = None,
+    min_range: float = 0.0,
+    augmented: Any = None,
+    kld: Any = None,
+    rules: Any = None,
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
+
+    The filtering loop is :func:`localize.mcl.run_filter`, the one run driver
+    (update gating, estimates, the searching / localized / lost state); this
+    function only builds the filter from the command line's settings.
 
     Parameters
     ----------
@@ -193,7 +208,7 @@ def localize_log(
     log : LaserLog
         Scans and odometry (the controls are consecutive odometry poses).
     n_particles : int
-        Number of particles.
+        Number of particles (with ``kld``: the initial number).
     rng : numpy.random.Generator
         The only source of randomness (required).
     sensor : {"likelihood", "beam"}
@@ -232,12 +247,21 @@ def localize_log(
         Updated after each scan.
     sensor_params : dict, optional
         Extra keyword arguments of the sensor model.
+    min_range : float
+        Readings at or below this range (metres) are not evidence (likelihood
+        field; AMCL's ``laser_min_range``).
+    augmented : localize.mcl.Augmented or (alpha_slow, alpha_fast), optional
+        Augmented MCL (random particles when the scans suddenly fit worse).
+    kld : localize.kld.KLDSampling, optional
+        KLD-sampling: the particle count adapts to the spread of the belief.
+    rules : localize.mcl.StateRules, optional
+        Thresholds of the honest state.
 
     Returns
     -------
     RunResult
     """
-    from .mcl import MCL
+    from .mcl import MCL, run_filter
 
     if rng is None or not isinstance(rng, np.random.Generator):
         raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
@@ -246,11 +270,14 @@ def localize_log(
     if beams is not None and beams < log.n_beams:
         log = log.select_beams(count=beams)
     mr = log.max_range if max_range is None else min(float(max_range), log.max_range)
-    model = make_sensor(sensor, grid, mr, log.sensor_offset, temper=temper, **(sensor_params or {}))
+    params = dict(sensor_params or {})
+    if sensor == "likelihood" and min_range:
+        params.setdefault("min_range", float(min_range))
+    model = make_sensor(sensor, grid, mr, log.sensor_offset, temper=temper, **params)
     ranges = np.minimum(log.ranges, mr)
     motion = ReversibleOdometry(alphas)
     opts: dict[str, Any] = dict(resample_threshold=resample_threshold, injection=injection,
-                                free_space_only=free_space_only)
+                                free_space_only=free_space_only, augmented=augmented, kld=kld)
     if init == "global":
         f = MCL.uniform(grid, n_particles, motion, model, rng=rng, **opts)
     else:
@@ -258,37 +285,18 @@ def localize_log(
             raise ValueError("init='reference' needs reference poses in the log (log.poses is None)")
         f = MCL.gaussian(log.poses[0], tuple(init_std), n_particles, motion, model, rng=rng, grid=grid, **opts)
     k_scans = len(log)
-    est = np.zeros((k_scans, 3))
-    spread = np.zeros(k_scans)
-    neff = np.zeros(k_scans)
-    updated = np.zeros(k_scans, dtype=bool)
-    snaps: dict = {}
-    d_min, a_min = (float(v) for v in min_motion)
-    last_update_odom = None
-    t0 = time.perf_counter()
-    for k in range(k_scans):
-        u = None if k == 0 else (log.odometry[k - 1], log.odometry[k])
-        do_update = True
-        if last_update_odom is not None and (d_min > 0 or a_min > 0):
-            m = relative(last_update_odom, log.odometry[k])
-            do_update = bool(np.hypot(m[0], m[1]) >= d_min or abs(m[2]) >= a_min)
-        if do_update:
-            e = f.step(u, ranges[k], log.angles)
-            last_update_odom = log.odometry[k]
-        else:
-            e = f.step(u)
-        updated[k] = do_update
-        est[k] = e.pose if np.all(np.isfinite(e.pose)) else e.mean
-        spread[k] = float(np.sqrt(e.cov[0, 0] + e.cov[1, 1]))
-        neff[k] = f.status.n_eff
-        if snapshot_every and (k % snapshot_every == 0 or k == k_scans - 1):
-            sub = np.linspace(0, f.n - 1, min(f.n, snapshot_particles)).astype(int)
-            snaps[k] = (f.particles[sub].copy(), f.weights[sub].copy())
-        if progress is not None:
-            progress.update(k + 1)
-    seconds = time.perf_counter() - t0
-    return RunResult(times=np.asarray(log.times), estimates=est, spread=spread, n_eff=neff, updated=updated,
-                     seconds=seconds, snapshots=snaps)
+    snap_steps: Sequence[int] = ()
+    if snapshot_every:
+        snap_steps = sorted(set(range(0, k_scans, snapshot_every)) | {k_scans - 1})
+    odo = log.odometry
+    angles = log.angles
+    tr = run_filter(f, k_scans, lambda k: (odo[k - 1], odo[k]), lambda k: (ranges[k], angles), grid=grid,
+                    min_motion=tuple(min_motion), rules=rules, snapshot_steps=snap_steps,
+                    snapshot_particles=snapshot_particles, odometry=odo,
+                    callback=None if progress is None else progress.update)
+    spread = np.sqrt(tr.stds[:, 0] ** 2 + tr.stds[:, 1] ** 2)
+    return RunResult(times=np.asarray(log.times), estimates=tr.poses, spread=spread, n_eff=tr.n_eff,
+                     updated=tr.updated, seconds=tr.seconds, snapshots=tr.snapshots, state=tr.state, trace=tr)
 
 
 # ============================================================================ outputs
@@ -544,6 +552,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # ============================================================================ main
+def run_kwargs(args: argparse.Namespace) -> dict:
+    """The keyword arguments of :func:`localize_log` that the ``run`` options stand for.
+
+    The benchmarks call this with the parser's defaults, so that they measure
+    exactly what ``localize run`` does.
+
+    Examples
+    --------
+    >>> args = build_parser().parse_args(["run", "--log", "x.log", "--map", "m.yaml"])
+    >>> run_kwargs(args)["n_particles"] == args.particles
+    True
+    """
+    return dict(
+        n_particles=args.particles, sensor=args.sensor, alphas=tuple(args.alphas), beams=args.beams,
+        max_range=args.max_range, init="reference" if args.track else "global", min_motion=tuple(args.min_motion),
+        injection=args.injection, temper=args.temper, sensor_params={"sigma_hit": args.sigma_hit},
+    )
+
+
 def _load(args, err: TextIO):
     from . import io as lio
 
@@ -596,11 +623,7 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
     progress = Progress(len(log), stream=err, enabled=None if not quiet else False)
     frames = max(1, int(np.ceil(len(log) / args.frames))) if args.animate else 0
     rng = np.random.default_rng(args.seed)
-    res = localize_log(
-        grid, log, n_particles=args.particles, rng=rng, sensor=args.sensor, alphas=tuple(args.alphas),
-        beams=args.beams, max_range=args.max_range, init="reference" if args.track else "global",
-        min_motion=tuple(args.min_motion), injection=args.injection, snapshot_every=frames, temper=args.temper,
-        progress=progress, sensor_params={"sigma_hit": args.sigma_hit})
+    res = localize_log(grid, log, rng=rng, snapshot_every=frames, progress=progress, **run_kwargs(args))
     progress.close()
     args.out.mkdir(parents=True, exist_ok=True)
     ref = log.poses

@@ -520,6 +520,12 @@ class LikelihoodField:
         point far from any wall like one clearly missing.
     sensor_offset, max_beams, temper
         As for :class:`BeamModel`.
+    min_range : float
+        Readings ``<= min_range`` are skipped like max-range readings (ROS
+        AMCL's ``laser_min_range``): a laser cannot measure closer than its
+        minimum range, and real scanners report 0 (or a tiny number) for a
+        failed reading. Such readings are not evidence. A reading of exactly
+        0 is always skipped.
 
     Examples
     --------
@@ -536,9 +542,13 @@ class LikelihoodField:
     def __init__(self, grid: OccupancyGrid, max_range: float, z_hit: float = 0.9, z_rand: float = 0.1,
                  sigma_hit: float = 0.2, *, max_dist: float | None = None,
                  sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
-                 temper: float = 1.0) -> None:
+                 temper: float = 1.0, min_range: float = 0.0) -> None:
         self.grid = _check_grid(grid)
         self.max_range = _check_max_range(max_range)
+        mn = float(min_range)
+        if not (np.isfinite(mn) and 0.0 <= mn < self.max_range):
+            raise ValueError(f"min_range must lie in [0, max_range = {self.max_range:g}) metres; got {min_range!r}")
+        self.min_range = mn
         w = _weights(("z_hit", "z_rand"), (z_hit, z_rand))
         self.z_hit, self.z_rand = float(w[0]), float(w[1])
         self.sigma_hit = _positive("sigma_hit", sigma_hit)
@@ -617,7 +627,7 @@ class LikelihoodField:
         for n, (x, y, th) in enumerate(sp):
             q = 0.0
             for zk, ak in zip(z, a):
-                if zk >= self.max_range:
+                if zk >= self.max_range or zk <= self.min_range:
                     continue
                 ex, ey = x + zk * math.cos(th + ak), y + zk * math.sin(th + ak)
                 d = self.grid.distance_at([ex, ey], outside=self.max_dist)
@@ -632,13 +642,13 @@ class LikelihoodField:
             raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
         sel = select_beams(a.size, self.max_beams)
         z, a = z[sel], a[sel]
-        keep = z < self.max_range
+        keep = (z < self.max_range) & (z > self.min_range)
         return z[keep], a[keep]
 
     def log_likelihood(self, poses: ArrayLike, ranges: ArrayLike, angles: ArrayLike) -> NDArray[np.float64]:
         """Log-likelihood ``(N,)`` of one scan for each robot pose (vectorised end-point lookups).
 
-        Max-range readings are skipped. End points off the map score as at
+        Max-range readings and readings ``<= min_range`` are skipped. End points off the map score as at
         ``max_dist``; poses far outside the map are clipped onto the padded
         table's border cells, which hold that score.
 
