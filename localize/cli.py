@@ -39,7 +39,6 @@ from typing import Any, Sequence, TextIO
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .geometry import relative
 from .grid import OccupancyGrid
 from .mcl import ReversibleOdometry  # re-exported: it lived here before moving next to OdometryMotion
 
