@@ -149,7 +149,8 @@ def judge(est: np.ndarray, ref: np.ndarray) -> dict:
             "error_after": float(np.median(e_xy[conv:])) if conv is not None else None, "errors": e_xy}
 
 
-def run_one(job: dict) -> dict:
+def prepare(job: dict):
+    """``(map, log, keyword arguments)`` of one benchmark run."""
     name, start, seed, n_scans, opts = job["name"], job["start"], job["seed"], job["scans"], job["opts"]
     log, grid = load(name)
     map_rng = np.random.default_rng([start, 12345])
@@ -157,9 +158,24 @@ def run_one(job: dict) -> dict:
         sub = willow_log(grid, n_scans, np.random.default_rng([start, 777]))
     else:
         sub = log.select(slice(start, min(start + n_scans, len(log))))
-    bad_map = degrade_map(grid, map_rng)
+    bad_map = grid if job.get("clean") else degrade_map(grid, map_rng)
     kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-"]))
     kw.update(opts)
+    if isinstance(kw.get("kld"), list):
+        from localize.kld import KLDSampling
+        e_, lo_, hi_ = kw["kld"]
+        kw["kld"] = KLDSampling(epsilon=e_, n_min=lo_, n_max=hi_)
+    if isinstance(kw.get("augmented"), list):
+        from localize.mcl import Augmented
+        kw["augmented"] = Augmented(*kw["augmented"])
+    if kw.pop("_unknown_not_obstacle", False):
+        bad_map = OccupancyGrid(bad_map.data, bad_map.resolution, origin=bad_map.origin, unknown_is_obstacle=False)
+    return bad_map, sub, kw
+
+
+def run_one(job: dict) -> dict:
+    name, start, seed = job["name"], job["start"], job["seed"]
+    bad_map, sub, kw = prepare(job)
     t0 = time.perf_counter()
     res = cli.localize_log(bad_map, sub, rng=np.random.default_rng(seed), **kw)
     wall = time.perf_counter() - t0
@@ -223,6 +239,7 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="override a localize_log keyword (experiments only), e.g. --set n_particles=20000")
+    ap.add_argument("--clean-map", action="store_true", help="diagnostics: localize on the undegraded map")
     ap.add_argument("--write", action="store_true", help="write the bench_global section of RESULTS.md")
     ap.add_argument("--json", type=Path, default=None, help="also write every run's row to this file")
     args = ap.parse_args(argv)
@@ -240,7 +257,7 @@ def main(argv=None) -> int:
     for n in names:
         log, _ = load(n)
         starts = list(range(args.starts)) if n == "willow" else start_scans(len(log), args.scans, args.starts)
-        jobs += [{"name": n, "start": s, "seed": seed, "scans": args.scans, "opts": opts}
+        jobs += [{"name": n, "start": s, "seed": seed, "scans": args.scans, "opts": opts, "clean": args.clean_map}
                  for s in starts for seed in range(args.seeds)]
     t1 = time.perf_counter()
     if args.workers > 1:

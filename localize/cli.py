@@ -134,7 +134,7 @@ def make_sensor(kind: str, grid: OccupancyGrid, max_range: float, sensor_offset:
     from . import sensors
 
     if kind == "likelihood":
-        kw: dict[str, Any] = dict(z_hit=0.9, z_rand=0.1, sigma_hit=0.3)
+        kw: dict[str, Any] = dict(z_hit=0.9, z_rand=0.1, sigma_hit=0.3, unknown_is_obstacle=False)
         kw.update(params)
         return sensors.LikelihoodField(grid, max_range, sensor_offset=tuple(sensor_offset), **kw)
     if kind == "beam":
@@ -193,6 +193,8 @@ def localize_log(
     augmented: Any = None,
     kld: Any = None,
     rules: Any = None,
+    unknown_allowed: bool = False,
+    unknown_penalty: float = 0.0,
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
@@ -255,6 +257,8 @@ def localize_log(
         KLD-sampling: the particle count adapts to the spread of the belief.
     rules : localize.mcl.StateRules, optional
         Thresholds of the honest state.
+    unknown_allowed : bool
+        With ``free_space_only``, let particles stand in unknown cells too.
 
     Returns
     -------
@@ -276,7 +280,8 @@ def localize_log(
     ranges = np.minimum(log.ranges, mr)
     motion = ReversibleOdometry(alphas)
     opts: dict[str, Any] = dict(resample_threshold=resample_threshold, injection=injection,
-                                free_space_only=free_space_only, augmented=augmented, kld=kld)
+                                free_space_only=free_space_only, augmented=augmented, kld=kld,
+                                unknown_allowed=unknown_allowed, unknown_penalty=unknown_penalty)
     if init == "global":
         f = MCL.uniform(grid, n_particles, motion, model, rng=rng, **opts)
     else:
@@ -327,8 +332,9 @@ def converged_at(values: ArrayLike, threshold: float = 0.5, hold: int = 20) -> i
 
 
 def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = None) -> Path:
-    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff`` (+ reference and error)."""
-    cols = ["time", "x", "y", "theta", "spread", "n_eff"]
+    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state`` (+ reference and error)."""
+    cols = ["time", "x", "y", "theta", "spread", "n_eff", "state"]
+    state = res.state if res.state is not None else np.full(len(res.times), "")
     if reference is not None:
         cols += ["ref_x", "ref_y", "ref_theta", "error"]
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
@@ -337,7 +343,7 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
         w.writerow(cols)
         for k in range(len(res.times)):
             row = [f"{res.times[k]:.6f}", *(f"{v:.6f}" for v in res.estimates[k]), f"{res.spread[k]:.4f}",
-                   f"{res.n_eff[k]:.1f}"]
+                   f"{res.n_eff[k]:.1f}", str(state[k])]
             if reference is not None:
                 row += [*(f"{v:.6f}" for v in reference[k]), f"{err[k]:.4f}"]
             w.writerow(row)
@@ -367,6 +373,11 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
     }
     if not reliable:
         out["real_time_factor_note"] = "the log's time stamps are not usable (too coarse or out of order)"
+    if res.trace is not None:
+        out["state"] = res.trace.state_summary()
+        out["state"]["meaning"] = ("searching: no single, well-fitting hypothesis yet; localized: one cluster holds "
+                                   "most of the weight, is tight, and the scans fit the map there; lost: it was "
+                                   "localized and no longer is (see localize.mcl.StateRules)")
     if reference is not None:
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
         cs = converged_at(err, threshold, hold)
@@ -375,8 +386,43 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
         out["median_error_after_convergence_m"] = (
             round(float(np.median(err[cs:])), 4) if cs is not None else None)
         out["final_error_m"] = round(float(err[-1]), 4)
+        if res.state is not None:
+            loc = res.state == "localized"
+            out["median_error_while_localized_m"] = round(float(np.median(err[loc])), 4) if loc.any() else None
+            out["p90_error_while_localized_m"] = (round(float(np.percentile(err[loc], 90)), 4)
+                                                  if loc.any() else None)
+            out["localized_scans_over_1m_off"] = int(np.sum(loc & (err > 1.0)))
     out["settings"] = settings
     return out
+
+
+def headline(summary: dict) -> str:
+    """The terminal's one-line account of the state: "localized from scan K; lost at ...; final state ...".
+
+    Examples
+    --------
+    >>> headline({"state": {"first_localized_scan": 12, "lost_intervals": [[40, 45]], "final_state": "localized",
+    ...                     "scans_without_valid_readings": 0, "events": []}})
+    'localized from scan 12; lost at scans 40-45; final state: localized'
+    >>> headline({"state": {"first_localized_scan": None, "lost_intervals": [], "final_state": "searching",
+    ...                     "scans_without_valid_readings": 90, "events": []}, "scans": 90})
+    'NOT localized: still searching at the end; 90 of 90 scans had no valid reading'
+    """
+    st = summary.get("state")
+    if not st:
+        return f"converged (particle spread < 0.5 m) at scan {summary.get('convergence_step')}"
+    k = st["first_localized_scan"]
+    parts = [f"localized from scan {k}" if k is not None else "NOT localized: still searching at the end"]
+    if st["lost_intervals"]:
+        parts.append("lost at scans " + ", ".join(f"{a}-{b}" for a, b in st["lost_intervals"]))
+    if k is not None:
+        parts.append(f"final state: {st['final_state']}")
+    if st.get("scans_without_valid_readings"):
+        parts.append(f"{st['scans_without_valid_readings']} of {summary.get('scans', '?')} scans had no valid reading")
+    rejected = sum("odometry" in t for _, t in st.get("events", []))
+    if rejected:
+        parts.append(f"{rejected} impossible odometry step(s) rejected")
+    return "; ".join(parts)
 
 
 def write_animation(out_dir: Path, grid: OccupancyGrid, res: RunResult, reference: NDArray | None,
@@ -651,11 +697,12 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
         lines = [
             f"{len(log)} scans, {args.particles} particles, {summary['seconds_per_scan'] * 1000:.1f} ms per scan"
             + (f", {rtf:g}x real time" if rtf else ""),
-            f"converged (particle spread < 0.5 m) at scan {summary['convergence_step']}",
+            headline(summary),
         ]
-        if ref is not None:
-            lines.append(f"against the log's reference poses: converged at scan "
-                         f"{summary['convergence_step_reference']}, median error {summary['median_error_m']} m")
+        if ref is not None and summary.get("median_error_while_localized_m") is not None:
+            lines.append(f"against the log's reference poses, while localized: median error "
+                         f"{summary['median_error_while_localized_m']} m, 90% {summary['p90_error_while_localized_m']} m"
+                         f" ({summary['localized_scans_over_1m_off']} localized scans more than 1 m off)")
         lines.append(f"wrote {args.out / 'trajectory.csv'} and {args.out / 'summary.json'}")
         print("\n".join(lines), file=out)
     return 0

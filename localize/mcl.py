@@ -581,6 +581,16 @@ class MCL:
     free_space_only : bool
         Give zero weight to particles outside the known-free cells of ``grid``
         (robots cannot stand in walls).
+    unknown_allowed : bool
+        With ``free_space_only``: let particles stand in *unknown* cells too
+        (only known obstacles and the outside of the map are forbidden). Real
+        maps leave parts of a building unknown, and the robot drives there.
+    unknown_penalty : float
+        With ``unknown_allowed``: subtract this from the log-likelihood of
+        particles in unknown cells at each update (>= 0). A soft prior: when
+        the whole cloud is in an unknown region it changes nothing (every
+        particle pays it), but a few particles that wandered through a wall
+        into the unknown outside of a building lose against those inside.
     on_degenerate : {"keep", "reinitialize"}
         What to do when an update leaves every particle with zero weight:
         keep the particles and previous weights, ignoring the measurement
@@ -621,6 +631,8 @@ class MCL:
         grid: OccupancyGrid | None = None,
         free_space_only: bool = False,
         on_degenerate: str = "keep",
+        unknown_allowed: bool = False,
+        unknown_penalty: float = 0.0,
     ) -> None:
         self.rng = _check_rng(rng)
         p = as_poses(particles, "particles")
@@ -689,8 +701,15 @@ class MCL:
         if free_space_only and grid is None:
             raise ValueError("free_space_only=True needs the map: pass grid=...")
         self.free_space_only = bool(free_space_only)
+        pen = float(unknown_penalty)
+        if not (np.isfinite(pen) and pen >= 0):
+            raise ValueError(f"unknown_penalty must be a number >= 0; got {unknown_penalty!r}")
+        self.unknown_penalty = pen if (free_space_only and unknown_allowed) else 0.0
         if self.free_space_only:
-            self._free = np.ascontiguousarray(grid.free)
+            allowed = ~grid.occupied if unknown_allowed else grid.free
+            self._free = np.ascontiguousarray(allowed)
+            if self.unknown_penalty:
+                self._unknown = np.ascontiguousarray(grid.unknown)
         self.status = MCLStatus(n_particles=n, n_eff=self.n_eff)
 
     # ------------------------------------------------------------ constructors
@@ -836,6 +855,8 @@ class MCL:
             ll = np.where(bad, -np.inf, ll)
         if self.free_space_only:
             ll = np.where(self._in_free_space(self.particles), ll, -np.inf)
+            if self.unknown_penalty:
+                ll = ll - self.unknown_penalty * self._in_free_space(self.particles, self._unknown)
         lw = self.log_weights + ll
         # log-sum-exp by hand: the shifted exponentials also give N_eff without a second pass
         top = float(lw.max())
@@ -1015,7 +1036,8 @@ class MCL:
         st.n_particles = self.n
         return est
 
-    def _in_free_space(self, poses: NDArray) -> NDArray[np.bool_]:
+    def _in_free_space(self, poses: NDArray, mask: NDArray | None = None) -> NDArray[np.bool_]:
+        mask = self._free if mask is None else mask
         g = self.grid
         rel = (poses[:, :2] - g.origin) / g.resolution
         j = np.floor(rel[:, 0]).astype(np.int64)
@@ -1023,7 +1045,7 @@ class MCL:
         h, w = self._free.shape
         ok = (i >= 0) & (i < h) & (j >= 0) & (j < w)
         out = np.zeros(poses.shape[0], dtype=bool)
-        out[ok] = self._free[i[ok], j[ok]]
+        out[ok] = mask[i[ok], j[ok]]
         return out
 
     def __repr__(self) -> str:
@@ -1303,7 +1325,7 @@ class RunTrace:
     updated, resampled, degenerate : ndarray (T,) of bool
         Whether the step used its scan, resampled, and whether every particle got zero likelihood.
     n_valid : ndarray (T,) of int
-        Valid readings of the scan (inside the sensor's range limits).
+        Valid readings of the scan (inside the sensor's range limits; range scans only).
     fit : ndarray (T,)
         Share of valid beams that fit the map at the estimate (NaN when not assessed).
     on_map : ndarray (T,)
@@ -1379,6 +1401,14 @@ def _intervals(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(starts, stops)]
 
 
+def _is_scan(z: Any) -> bool:
+    """True for a range scan ``(ranges (B,), angles (B,))``."""
+    if not isinstance(z, tuple) or len(z) != 2:
+        return False
+    a, b = np.shape(z[0]), np.shape(z[1])
+    return len(a) == 1 and a == b
+
+
 def _odometry_pair(u: Any) -> tuple[NDArray, NDArray] | None:
     """``(prev, cur)`` if ``u`` is a pair of odometry poses, else None."""
     if isinstance(u, tuple) and len(u) == 2:
@@ -1439,7 +1469,8 @@ def run_filter(
         See above.
     grid : OccupancyGrid, optional
         The map: needed for the scan fit, the off-map check and ``max_step``
-        (default: the filter's own ``grid``).
+        (default: the filter's own ``grid``). Particles count as off the map
+        outside the grid or in known obstacle cells (unknown cells are allowed).
     min_motion : (float, float)
         Update gating; ``(0, 0)`` uses every scan.
     max_step : float, optional
@@ -1502,9 +1533,10 @@ def run_filter(
         fit_d = 2.0 * float(getattr(sensor, "sigma_hit", 0.2))
     fit_expected = expected_fit(sensor, fit_d)
     if grid is not None:
-        dist = grid.distance_field
-        unknown = grid.unknown
-        free = grid.free
+        from .raycast import RayCaster
+
+        caster = RayCaster(grid, hi_r if np.isfinite(hi_r) else 1e3, method="march")
+        free = ~grid.occupied         # "on the map": inside the grid and not in a known obstacle
     out = {name: np.zeros((t, 3)) for name in ("poses", "means", "stds")}
     spread, best, n_eff, p_inj, fit, on_map = (np.full(t, np.nan) for _ in range(6))
     n_p, n_inj, n_valid = (np.zeros(t, dtype=np.int64) for _ in range(3))
@@ -1541,10 +1573,11 @@ def run_filter(
             m = _relative(last_odom, where)
             do_update = bool(not np.all(np.isfinite(m)) or np.hypot(m[0], m[1]) >= d_min or abs(m[2]) >= a_min)
         n_p[k] = mcl.n
-        if do_update:
+        if _is_scan(z):
             ranges, angles = np.asarray(z[0], dtype=float), np.asarray(z[1], dtype=float)
             valid = np.isfinite(ranges) & (ranges > lo_r) & (ranges < hi_r)
             n_valid[k] = int(valid.sum())
+        if do_update:
             mcl.update(*z)
             evals += int(n_p[k]) * int(np.size(angles))
             last_odom = where
@@ -1564,9 +1597,8 @@ def run_filter(
         if grid is not None:
             inside = _free_share(grid, free, mcl.particles, mcl.weights)
             on_map[k] = inside
-        if do_update and grid is not None and n_valid[k] > 0:
-            fit[k] = _scan_fit(grid, dist, unknown, pose, offset, ranges[valid], angles[valid], fit_d,
-                               rules.min_beams)
+        if do_update and grid is not None and n_valid[k] > 0 and _is_scan(z):
+            fit[k] = _scan_fit(caster, pose, offset, ranges[valid], angles[valid], fit_d, rules.min_beams)
         off_map = grid is not None and on_map[k] == 0.0
         if recover and (degenerate or off_map) and mcl.sampler is not None:
             mcl.particles = np.asarray(mcl.sampler(mcl.n, mcl.rng), dtype=float)
@@ -1584,7 +1616,7 @@ def run_filter(
             if cur == "localized":
                 cur = "lost"
         elif do_update:
-            confident = (n_valid[k] >= rules.min_beams and e.best_weight >= rules.min_share
+            confident = ((not _is_scan(z) or n_valid[k] >= rules.min_beams) and e.best_weight >= rules.min_share
                          and e.spread <= rules.max_spread
                          and (e.cluster_std is None or e.cluster_std[2] <= rules.max_heading_std)
                          and (np.isnan(fit[k]) or fit[k] >= rules.min_fit * fit_expected))
@@ -1629,24 +1661,22 @@ def _free_share(grid: OccupancyGrid, free: NDArray, particles: NDArray, weights:
     return float(weights[inside].sum() / max(weights.sum(), 1e-300))
 
 
-def _scan_fit(grid: OccupancyGrid, dist: NDArray, unknown: NDArray, pose: NDArray, offset: NDArray,
-              ranges: NDArray, angles: NDArray, fit_d: float, min_beams: int) -> float:
-    """Share of beams whose end points (from ``pose``) lie within ``fit_d`` of an obstacle.
+def _scan_fit(caster: Any, pose: NDArray, offset: NDArray, ranges: NDArray, angles: NDArray, fit_d: float,
+              min_beams: int) -> float:
+    """Share of beams whose reading agrees with the map's ray-cast range from ``pose`` within ``fit_d``.
 
-    End points in unknown cells or off the map say nothing and are left out;
-    with fewer than ``min_beams`` assessable beams the fit is NaN.
+    A beam that reads much longer than the map allows passed "through" a
+    mapped wall; one that reads much shorter hit something the map does not
+    show. Either way the map does not confirm it. (The likelihood field
+    cannot see the first kind: it only asks how close the end point is to
+    *some* obstacle, so a wrong pose whose beams pass through walls can score
+    well; this check is what makes the state honest about it.) With fewer than
+    ``min_beams`` beams the fit is NaN.
     """
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    sx = pose[0] + c * offset[0] - s * offset[1]
-    sy = pose[1] + s * offset[0] + c * offset[1]
-    a = pose[2] + offset[2] + angles
-    ex, ey = sx + ranges * np.cos(a), sy + ranges * np.sin(a)
-    j = np.floor((ex - grid.origin[0]) / grid.resolution).astype(np.int64)
-    i = np.floor((ey - grid.origin[1]) / grid.resolution).astype(np.int64)
-    h, w = dist.shape
-    ok = (i >= 0) & (i < h) & (j >= 0) & (j < w)
-    i, j = i[ok], j[ok]
-    known = ~unknown[i, j]
-    if int(known.sum()) < min_beams:
+    if ranges.size < min_beams:
         return float("nan")
-    return float(np.mean(dist[i[known], j[known]] <= fit_d))
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    sp = np.array([[pose[0] + c * offset[0] - s * offset[1], pose[1] + s * offset[0] + c * offset[1],
+                    pose[2] + offset[2]]])
+    expected = caster.cast(sp, angles)[0]
+    return float(np.mean(np.abs(ranges - expected) <= fit_d))

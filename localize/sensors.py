@@ -526,6 +526,16 @@ class LikelihoodField:
         minimum range, and real scanners report 0 (or a tiny number) for a
         failed reading. Such readings are not evidence. A reading of exactly
         0 is always skipped.
+    unknown_is_obstacle : bool, optional
+        Whether unknown map cells count as obstacles in the distance field
+        (default: the grid's own setting). ``False`` measures every end point's
+        distance to the nearest *known* obstacle, as ROS AMCL does. With
+        ``True``, every beam that ends in unknown space -- beyond the outer
+        walls of a map built from scans -- scores as a perfect hit, which
+        rewards wrong poses whose scans seem to pass through walls. With
+        ``False``, end points in unknown cells and off the map get one
+        neutral score, the same for every pose: that of an end point dropped
+        at a random place of the known map (``unknown_log_prob``).
 
     Examples
     --------
@@ -542,8 +552,15 @@ class LikelihoodField:
     def __init__(self, grid: OccupancyGrid, max_range: float, z_hit: float = 0.9, z_rand: float = 0.1,
                  sigma_hit: float = 0.2, *, max_dist: float | None = None,
                  sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
-                 temper: float = 1.0, min_range: float = 0.0) -> None:
-        self.grid = _check_grid(grid)
+                 temper: float = 1.0, min_range: float = 0.0, unknown_is_obstacle: bool | None = None,
+                 unknown_neutral: bool = True) -> None:
+        self.unknown_neutral = bool(unknown_neutral)
+        grid = _check_grid(grid)
+        if unknown_is_obstacle is not None and bool(unknown_is_obstacle) != grid.unknown_is_obstacle:
+            grid = OccupancyGrid(grid.data, grid.resolution, origin=grid.origin,
+                                 occupied_threshold=grid.occupied_threshold,
+                                 unknown_is_obstacle=bool(unknown_is_obstacle))
+        self.grid = grid
         self.max_range = _check_max_range(max_range)
         mn = float(min_range)
         if not (np.isfinite(mn) and 0.0 <= mn < self.max_range):
@@ -583,8 +600,17 @@ class LikelihoodField:
         res = g.resolution
         pad = int(math.ceil(self.max_range / res)) + 2
         rows, cols = g.shape
-        table = np.full((rows + 2 * pad, cols + 2 * pad), float(self.point_log_prob(self.max_dist)))
-        table[pad:pad + rows, pad:pad + cols] = self.point_log_prob(g.distance_field)
+        cells = self.point_log_prob(g.distance_field)
+        outside = float(self.point_log_prob(self.max_dist))
+        if not g.unknown_is_obstacle and self.unknown_neutral:
+            # the map says nothing about unknown cells and the world off the map: an end point there
+            # scores like one dropped at a random place of the known map (the same for every pose)
+            known = ~g.unknown
+            outside = float(np.log(np.mean(np.exp(cells[known])))) if known.any() else outside
+            cells = np.where(known, cells, outside)
+        self.unknown_log_prob = outside
+        table = np.full((rows + 2 * pad, cols + 2 * pad), outside)
+        table[pad:pad + rows, pad:pad + cols] = cells
         self._pad = pad
         self._table = table.astype(np.float32)
         self._flat = self._table.ravel()
@@ -630,7 +656,12 @@ class LikelihoodField:
                 if zk >= self.max_range or zk <= self.min_range:
                     continue
                 ex, ey = x + zk * math.cos(th + ak), y + zk * math.sin(th + ak)
-                d = self.grid.distance_at([ex, ey], outside=self.max_dist)
+                g = self.grid
+                if not g.unknown_is_obstacle and self.unknown_neutral and (not g.contains([ex, ey]) or g.unknown[tuple(
+                        g.world_to_cell([ex, ey]))]):
+                    q += self.unknown_log_prob          # the map says nothing here
+                    continue
+                d = g.distance_at([ex, ey], outside=self.max_dist)
                 q += float(self.point_log_prob(d))
             out[n] = q * self.temper
         return out
