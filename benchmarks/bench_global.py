@@ -151,7 +151,7 @@ def judge(est: np.ndarray, ref: np.ndarray) -> dict:
 
 def prepare(job: dict):
     """``(map, log, keyword arguments)`` of one benchmark run."""
-    name, start, seed, n_scans, opts = job["name"], job["start"], job["seed"], job["scans"], job["opts"]
+    name, start, n_scans, opts = job["name"], job["start"], job["scans"], job["opts"]
     log, grid = load(name)
     map_rng = np.random.default_rng([start, 12345])
     if name == "willow":
