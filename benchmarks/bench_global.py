@@ -41,6 +41,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(HERE))
 
 from localize import cli, io, mapping, sim  # noqa: E402
 from localize.geometry import angle_diff  # noqa: E402
@@ -159,7 +160,7 @@ def prepare(job: dict):
     else:
         sub = log.select(slice(start, min(start + n_scans, len(log))))
     bad_map = grid if job.get("clean") else degrade_map(grid, map_rng)
-    kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-"]))
+    kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-", *job.get("args", [])]))
     kw.update(opts)
     if isinstance(kw.get("kld"), list):
         from localize.kld import KLDSampling
@@ -239,6 +240,8 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="override a localize_log keyword (experiments only), e.g. --set n_particles=20000")
+    ap.add_argument("--args", default="", metavar="'OPTIONS'",
+                    help="options of `localize run` for every run (experiments), e.g. --args '--particles 20000'")
     ap.add_argument("--clean-map", action="store_true", help="diagnostics: localize on the undegraded map")
     ap.add_argument("--write", action="store_true", help="write the bench_global section of RESULTS.md")
     ap.add_argument("--json", type=Path, default=None, help="also write every run's row to this file")
@@ -257,7 +260,8 @@ def main(argv=None) -> int:
     for n in names:
         log, _ = load(n)
         starts = list(range(args.starts)) if n == "willow" else start_scans(len(log), args.scans, args.starts)
-        jobs += [{"name": n, "start": s, "seed": seed, "scans": args.scans, "opts": opts, "clean": args.clean_map}
+        jobs += [{"name": n, "start": s, "seed": seed, "scans": args.scans, "opts": opts, "clean": args.clean_map,
+                  "args": args.args.split()}
                  for s in starts for seed in range(args.seeds)]
     t1 = time.perf_counter()
     if args.workers > 1:
@@ -280,7 +284,7 @@ def main(argv=None) -> int:
         f"{args.scans} scans or to the end of the log. Success: within {SUCCESS_M} m and 10 deg of the reference "
         f"within the first {WITHIN:.0%} of the run, within {STAY_M} m after. `{cmd.strip()}`; "
         f"{len(jobs)} runs on {args.workers} processes in {wall / 60:.1f} min (+{t_load:.0f} s reading and mapping)."
-        + (f" Overrides: {opts}." if opts else ""),
+        + (f" Overrides: {opts}." if opts else "") + (f" Options: `{args.args}`." if args.args else ""),
         "",
         table(summarize(rows), cols),
         "",

@@ -62,6 +62,27 @@ examples:
 """
 
 
+# ============================================================================ defaults
+#: The defaults of ``localize run`` (see its --help and chapter 9 for the reasons behind each).
+DEFAULTS: dict[str, Any] = {
+    "particles": 5000,
+    "sensor": "likelihood",
+    "beams": 30,
+    "max_range": 30.0,
+    "alphas": (0.05, 0.01, 0.02, 0.05),
+    "sigma_hit": 0.3,
+    "temper": 0.05,
+    "min_motion": (0.2, 0.3),
+    "injection": 0.0,
+    "min_range": 0.05,
+    "kld": 0.0,
+    "min_particles": 500,
+    "augmented": (0.0, 0.0),
+    "recovery": 0.0,
+    "unknown_penalty": 1.0,
+}
+
+
 # ============================================================================ progress
 class Progress:
     """A one-line progress bar on a terminal; silent when the stream is not a terminal.
@@ -195,6 +216,7 @@ def localize_log(
     rules: Any = None,
     unknown_allowed: bool = False,
     unknown_penalty: float = 0.0,
+    recovery_injection: float = 0.0,
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
@@ -259,6 +281,12 @@ def localize_log(
         Thresholds of the honest state.
     unknown_allowed : bool
         With ``free_space_only``, let particles stand in unknown cells too.
+    unknown_penalty : float
+        Log-likelihood subtracted per update from particles in unknown cells
+        (see :class:`~localize.mcl.MCL`).
+    recovery_injection : float
+        Fraction of random particles injected at each resampling while the
+        state is ``lost`` (see :func:`localize.mcl.run_filter`).
 
     Returns
     -------
@@ -296,7 +324,7 @@ def localize_log(
     angles = log.angles
     tr = run_filter(f, k_scans, lambda k: (odo[k - 1], odo[k]), lambda k: (ranges[k], angles), grid=grid,
                     min_motion=tuple(min_motion), rules=rules, snapshot_steps=snap_steps,
-                    snapshot_particles=snapshot_particles, odometry=odo,
+                    snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
                     callback=None if progress is None else progress.update)
     spread = np.sqrt(tr.stds[:, 0] ** 2 + tr.stds[:, 1] ** 2)
     return RunResult(times=np.asarray(log.times), estimates=tr.poses, spread=spread, n_eff=tr.n_eff,
@@ -532,38 +560,61 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--scans", type=_scan_slice, default=None, metavar="START:STOP[:STEP]",
                    help="use only these scans of the log (Python slice). Example: --scans 0:500 or --scans ::2")
     f = run.add_argument_group("filter")
-    f.add_argument("--particles", type=_positive_int, default=5000, metavar="N",
+    f.add_argument("--particles", type=_positive_int, default=DEFAULTS["particles"], metavar="N",
                    help="number of particles (default 5000; global localization in a large building may "
                         "need 10000 or more). Example: --particles 10000")
     f.add_argument("--seed", type=int, default=0, metavar="S",
                    help="seed of the random generator: the same seed gives the same run (default 0). "
                         "Example: --seed 7")
-    f.add_argument("--sensor", choices=["likelihood", "beam"], default="likelihood",
+    f.add_argument("--sensor", choices=["likelihood", "beam"], default=DEFAULTS["sensor"],
                    help="sensor model: 'likelihood' field (fast, robust to small map errors; default) or the "
                         "'beam' model with ray casting. Example: --sensor beam")
-    f.add_argument("--beams", type=_positive_int, default=30, metavar="B",
+    f.add_argument("--beams", type=_positive_int, default=DEFAULTS["beams"], metavar="B",
                    help="use B evenly spread beams of each scan (default 30). Example: --beams 180")
-    f.add_argument("--max-range", type=_positive_float, default=30.0, metavar="M",
+    f.add_argument("--max-range", type=_positive_float, default=DEFAULTS["max_range"], metavar="M",
                    help="sensor model's maximum range in metres; longer readings count as 'no return' "
                         "(default 30). Example: --max-range 20")
-    f.add_argument("--alphas", type=_nonneg_float, nargs=4, default=(0.05, 0.01, 0.02, 0.05),
+    f.add_argument("--alphas", type=_nonneg_float, nargs=4, default=DEFAULTS["alphas"],
                    metavar=("A1", "A2", "A3", "A4"),
                    help="odometry noise alpha1..alpha4 of Probabilistic Robotics table 5.6, as variances "
                         "(default 0.05 0.01 0.02 0.05). Example: --alphas 0.1 0.02 0.05 0.1")
-    f.add_argument("--sigma-hit", type=_positive_float, default=0.3, metavar="M",
+    f.add_argument("--sigma-hit", type=_positive_float, default=DEFAULTS["sigma_hit"], metavar="M",
                    help="standard deviation of a beam's end point about the nearest wall (likelihood field) or "
                         "of a reading about the ray-cast range (beam model), metres (default 0.3: real maps are "
                         "off by 0.1-0.15 m and furniture moves). Example: --sigma-hit 0.2")
-    f.add_argument("--temper", type=_positive_float, default=0.05, metavar="T",
+    f.add_argument("--temper", type=_positive_float, default=DEFAULTS["temper"], metavar="T",
                    help="multiply each scan's log-likelihood by T in (0, 1] (default 0.05): beams are not "
                         "independent, and an over-confident filter locks onto a wrong place. Example: --temper 0.2")
-    f.add_argument("--min-motion", type=_nonneg_float, nargs=2, default=(0.2, 0.3), metavar=("M", "RAD"),
+    f.add_argument("--min-motion", type=_nonneg_float, nargs=2, default=DEFAULTS["min_motion"], metavar=("M", "RAD"),
                    help="weight the particles only after moving M metres or turning RAD radians since the last "
                         "update, like ROS AMCL (default 0.2 0.3; 0 0 updates at every scan). "
                         "Example: --min-motion 0 0")
-    f.add_argument("--injection", type=_nonneg_float, default=0.0, metavar="F",
+    f.add_argument("--injection", type=_nonneg_float, default=DEFAULTS["injection"], metavar="F",
                    help="fraction of random particles injected at each resampling (default 0). "
                         "Example: --injection 0.01")
+    f.add_argument("--min-range", type=_nonneg_float, default=DEFAULTS["min_range"], metavar="M",
+                   help="readings at or below M metres are not evidence, like ROS AMCL's laser_min_range: lasers "
+                        "report 0 (or a few millimetres) for a failed reading, and nothing closer than the "
+                        f"robot's own body is real (default {DEFAULTS['min_range']:g}; likelihood field). "
+                        "Example: --min-range 0.1")
+    f.add_argument("--kld", type=_nonneg_float, default=DEFAULTS["kld"], metavar="EPS",
+                   help="KLD-sampling (Fox 2003): after each resampling keep only as many particles as a belief "
+                        "of this spread needs, with KL-divergence bound EPS; --particles is then the initial (and "
+                        "largest) number, so global localization starts with a dense cloud that shrinks once the "
+                        f"filter agrees (default {DEFAULTS['kld']:g}; 0 keeps the number fixed). Example: --kld 0.1")
+    f.add_argument("--min-particles", type=_positive_int, default=DEFAULTS["min_particles"], metavar="N",
+                   help=f"with --kld, never fewer than N particles (default {DEFAULTS['min_particles']}). "
+                        "Example: --min-particles 2000")
+    f.add_argument("--augmented", type=_nonneg_float, nargs=2, default=DEFAULTS["augmented"],
+                   metavar=("SLOW", "FAST"),
+                   help="augmented MCL (Probabilistic Robotics table 8.3): inject random particles when the "
+                        "short-term average scan likelihood (rate FAST) drops below the long-term one (rate SLOW); "
+                        "0 0 switches it off (default "
+                        f"{DEFAULTS['augmented'][0]:g} {DEFAULTS['augmented'][1]:g}). Example: --augmented 0.01 0.2")
+    f.add_argument("--recovery", type=_nonneg_float, default=DEFAULTS["recovery"], metavar="F",
+                   help="while the state is 'lost', replace the fraction F of the particles by random ones at each "
+                        f"resampling, so that the filter searches again (default {DEFAULTS['recovery']:g}). "
+                        "Example: --recovery 0")
     f.add_argument("--track", action="store_true",
                    help="pose tracking instead of global localization: start around the log's first reference "
                         "pose (needs a corrected log).")
@@ -609,10 +660,27 @@ def run_kwargs(args: argparse.Namespace) -> dict:
     >>> run_kwargs(args)["n_particles"] == args.particles
     True
     """
+    from .kld import KLDSampling
+    from .mcl import Augmented
+
+    kld = None
+    if args.kld > 0:
+        kld = KLDSampling(epsilon=args.kld, n_min=min(args.min_particles, args.particles), n_max=args.particles)
+    slow, fast = args.augmented
+    aug = None
+    if slow > 0 or fast > 0:
+        try:
+            aug = Augmented(alpha_slow=slow, alpha_fast=fast, temperature=float(args.beams))
+        except ValueError as e:
+            raise ValueError(f"--augmented {slow:g} {fast:g}: {e}") from None
+    if not args.recovery < 1:
+        raise ValueError(f"--recovery must be a fraction below 1; got {args.recovery:g}")
     return dict(
         n_particles=args.particles, sensor=args.sensor, alphas=tuple(args.alphas), beams=args.beams,
         max_range=args.max_range, init="reference" if args.track else "global", min_motion=tuple(args.min_motion),
         injection=args.injection, temper=args.temper, sensor_params={"sigma_hit": args.sigma_hit},
+        min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
+        unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"],
     )
 
 

@@ -489,6 +489,7 @@ class MCLStatus:
     degenerate: bool = False
     n_degenerate: int = 0
     message: str = ""
+    beta: float = field(default=1.0, repr=False)
     log_w_slow: float = field(default=-np.inf, repr=False)
     log_w_fast: float = field(default=-np.inf, repr=False)
 
@@ -591,6 +592,17 @@ class MCL:
         the whole cloud is in an unknown region it changes nothing (every
         particle pays it), but a few particles that wandered through a wall
         into the unknown outside of a building lose against those inside.
+    min_ess : float
+        Adaptive tempering, in [0, 1): when one update would leave fewer than
+        ``min_ess * N`` effective particles, its log-likelihood is scaled by
+        the largest factor ``beta <= 1`` that keeps ``min_ess * N`` of them
+        (found by bisection; ``status.beta``). The annealing of Deutscher et
+        al. (2000) and of adaptive SMC samplers: no single scan may collapse
+        the cloud, so the outcome of global localization no longer hinges on
+        which few particles happened to fit the *first* scans best -- a
+        chance that grows with the number of particles (the best of more
+        random poses fits a look-alike place better). 0 (default) switches it
+        off.
     on_degenerate : {"keep", "reinitialize"}
         What to do when an update leaves every particle with zero weight:
         keep the particles and previous weights, ignoring the measurement
@@ -633,6 +645,7 @@ class MCL:
         on_degenerate: str = "keep",
         unknown_allowed: bool = False,
         unknown_penalty: float = 0.0,
+        min_ess: float = 0.0,
     ) -> None:
         self.rng = _check_rng(rng)
         p = as_poses(particles, "particles")
@@ -701,6 +714,10 @@ class MCL:
         if free_space_only and grid is None:
             raise ValueError("free_space_only=True needs the map: pass grid=...")
         self.free_space_only = bool(free_space_only)
+        me = float(min_ess)
+        if not 0.0 <= me < 1.0:
+            raise ValueError(f"min_ess must be a fraction in [0, 1); got {min_ess!r}")
+        self.min_ess = me
         pen = float(unknown_penalty)
         if not (np.isfinite(pen) and pen >= 0):
             raise ValueError(f"unknown_penalty must be a number >= 0; got {unknown_penalty!r}")
@@ -857,6 +874,9 @@ class MCL:
             ll = np.where(self._in_free_space(self.particles), ll, -np.inf)
             if self.unknown_penalty:
                 ll = ll - self.unknown_penalty * self._in_free_space(self.particles, self._unknown)
+        st.beta = 1.0
+        if self.min_ess > 0:
+            ll, st.beta = _adaptive_temper(self.log_weights, ll, self.min_ess * n)
         lw = self.log_weights + ll
         # log-sum-exp by hand: the shifted exponentials also give N_eff without a second pass
         top = float(lw.max())
@@ -1164,6 +1184,36 @@ def run_mcl(
 
 
 # --------------------------------------------------------------------------- helpers
+def _ess(lw: NDArray) -> float:
+    top = lw.max()
+    if not np.isfinite(top):
+        return 0.0
+    e = np.exp(lw - top)
+    return float(e.sum() ** 2 / (e @ e))
+
+
+def _adaptive_temper(log_w: NDArray, ll: NDArray, target: float) -> tuple[NDArray, float]:
+    """``(beta * ll, beta)`` with the largest ``beta`` in (0, 1] whose update keeps ``target`` effective particles.
+
+    ``-inf`` entries of ``ll`` (impossible poses) stay ``-inf`` at every ``beta``.
+    """
+    ok = np.isfinite(ll)
+    if _ess(log_w + ll) >= target:
+        return ll, 1.0
+    llf = np.where(ok, ll, 0.0)
+    base = np.where(ok, log_w, -np.inf)
+    if _ess(base) < target:                 # the impossible poses alone leave too few: use the bare mask
+        return np.where(ok, 0.0, -np.inf), 0.0
+    lo, hi = 0.0, 1.0
+    for _ in range(20):
+        mid = 0.5 * (lo + hi)
+        if _ess(base + mid * llf) >= target:
+            lo = mid
+        else:
+            hi = mid
+    return np.where(ok, lo * llf, -np.inf), lo
+
+
 def _ema_log(log_old: float, log_new: float, alpha: float) -> float:
     """``log((1 - alpha) * exp(log_old) + alpha * exp(log_new))`` without leaving log space."""
     return float(np.logaddexp(np.log1p(-alpha) + log_old, np.log(alpha) + log_new))
@@ -1431,6 +1481,7 @@ def run_filter(
     snapshot_steps: Any = (),
     snapshot_particles: int | None = None,
     recover: bool = True,
+    recovery_injection: float = 0.0,
     odometry: ArrayLike | None = None,
     callback: Callable[[int], None] | None = None,
 ) -> RunTrace:
@@ -1483,6 +1534,10 @@ def run_filter(
         Keep at most this many (evenly spaced) particles per snapshot.
     recover : bool
         Re-draw the particles when all of them got zero likelihood or left the map.
+    recovery_injection : float
+        While the state is ``lost``, replace this fraction of the particles by
+        random ones at each resampling (in [0, 1)): the filter searches the
+        map again instead of insisting on the place it lost.
     odometry : array_like (T, 3), optional
         Odometry pose at each step, for the gating (default: the second pose of
         each odometry control).
@@ -1513,6 +1568,9 @@ def run_filter(
     'localized'
     """
     rules = StateRules() if rules is None else rules
+    if not 0.0 <= float(recovery_injection) < 1.0:
+        raise ValueError(f"recovery_injection must be a fraction in [0, 1); got {recovery_injection!r}")
+    base_injection = mcl.injection
     t = int(n_steps)
     if t < 1:
         raise ValueError(f"n_steps must be >= 1; got {n_steps!r}")
@@ -1605,8 +1663,11 @@ def run_filter(
             mcl.log_weights = np.full(mcl.n, -np.log(mcl.n))
             why = "every particle got zero likelihood" if degenerate else "every particle left the map's free space"
             events.append((k, f"{why}: particles re-drawn over the map (global localization again)"))
-        elif mcl.needs_resampling():
+        elif mcl.needs_resampling() or (cur == "lost" and recovery_injection > 0 and do_update):
+            if cur == "lost" and recovery_injection > 0 and mcl.sampler is not None:
+                mcl.injection = max(base_injection, float(recovery_injection))
             mcl.resample()
+            mcl.injection = base_injection
         resampled[k], n_inj[k], p_inj[k] = st.resampled, st.n_injected, st.p_inject
         updated[k] = do_update
         # ---- state
