@@ -118,9 +118,12 @@ def load(name: str, root: Path | None = None):
 
 
 def willow_log(world: OccupancyGrid, n_scans: int, rng: np.random.Generator):
-    """A simulated robot in the Willow map: 181 beams over 180 degrees, 30 m range, unmapped clutter."""
+    """A simulated robot in the Willow map: 181 beams over 180 degrees, 30 m range, unmapped clutter.
+
+    It drives 0.5 m between scans, like the robots of the CARMEN logs (0.3-1 m).
+    """
     angles = np.radians(np.linspace(-90, 90, 181))
-    run = sim.range_run(world, rng, n_steps=n_scans, angles=angles, max_range=30.0, speed=0.3, dt=0.5,
+    run = sim.range_run(world, rng, n_steps=n_scans, angles=angles, max_range=30.0, speed=0.5, dt=1.0,
                         n_clutter=10)
     return io.LaserLog(times=run.times, odometry=run.odometry, ranges=run.ranges, angles=run.angles,
                        max_range=run.max_range, poses=run.poses, source="willow-sim", format="sim")
@@ -244,7 +247,10 @@ def main(argv=None) -> int:
                     help="options of `localize run` for every run (experiments), e.g. --args '--particles 20000'")
     ap.add_argument("--clean-map", action="store_true", help="diagnostics: localize on the undegraded map")
     ap.add_argument("--write", action="store_true", help="write the bench_global section of RESULTS.md")
-    ap.add_argument("--json", type=Path, default=None, help="also write every run's row to this file")
+    ap.add_argument("--json", type=Path, default=None,
+                    help="also write every run's row to this file (JSON lines, as the runs finish)")
+    ap.add_argument("--table-from", type=Path, default=None, metavar="FILE",
+                    help="do not run: print the table of the runs stored in FILE by --json (e.g. of a run cut short)")
     args = ap.parse_args(argv)
     opts = {}
     for kv in args.set:
@@ -263,13 +269,31 @@ def main(argv=None) -> int:
         jobs += [{"name": n, "start": s, "seed": seed, "scans": args.scans, "opts": opts, "clean": args.clean_map,
                   "args": args.args.split()}
                  for s in starts for seed in range(args.seeds)]
+    # interleave the logs, so that a run stopped early still covers every log
+    jobs.sort(key=lambda j: (j["seed"], j["start"] if j["name"] == "willow" else
+                             start_scans(len(load(j["name"])[0]), args.scans, args.starts).index(j["start"]), j["name"]))
     t1 = time.perf_counter()
-    if args.workers > 1:
+    rows = []
+    sink = open(args.json, "w") if args.json else None
+    if args.table_from:
+        rows = [json.loads(line) for line in open(args.table_from) if line.strip()]
+        jobs = rows
+    elif args.workers > 1:
         with mp.get_context("fork").Pool(args.workers) as pool:
-            rows = pool.map(run_one, jobs, chunksize=1)
+            for r in pool.imap_unordered(run_one, jobs, chunksize=1):
+                rows.append(r)
+                if sink:
+                    sink.write(json.dumps(r) + "\n")
+                    sink.flush()
     else:
-        rows = [run_one(j) for j in jobs]
+        for j in jobs:
+            rows.append(run_one(j))
+            if sink:
+                sink.write(json.dumps(rows[-1]) + "\n")
+                sink.flush()
     wall = time.perf_counter() - t1
+    if args.table_from:
+        wall = sum(r["wall"] for r in rows) / max(args.workers, 1)
     cols = ["log", "runs", "success", "scans to conv. median", "p90", "error after conv. median (m)",
             "wall per run median (s)", "real-time factor median", "ended localized", "ended localized > 1 m off"]
     from _util import table
@@ -290,8 +314,8 @@ def main(argv=None) -> int:
         "",
     ])
     print(text)
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=1, default=float))
+    if sink:
+        sink.close()
     if args.write:
         write_section(text)
     return 0

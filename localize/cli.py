@@ -65,20 +65,22 @@ examples:
 # ============================================================================ defaults
 #: The defaults of ``localize run`` (see its --help and chapter 9 for the reasons behind each).
 DEFAULTS: dict[str, Any] = {
-    "particles": 5000,
+    "particles": 50000,
     "sensor": "likelihood",
     "beams": 30,
     "max_range": 30.0,
     "alphas": (0.05, 0.01, 0.02, 0.05),
-    "sigma_hit": 0.3,
-    "temper": 0.05,
+    "sigma_hit": 0.2,
+    "temper": 0.3,
     "min_motion": (0.2, 0.3),
     "injection": 0.0,
     "min_range": 0.05,
-    "kld": 0.0,
-    "min_particles": 500,
+    "kld": 0.05,
+    "min_particles": 2000,
     "augmented": (0.0, 0.0),
     "recovery": 0.0,
+    "restart_after": 5,
+    "min_ess": 0.0,
     "unknown_penalty": 1.0,
 }
 
@@ -217,6 +219,8 @@ def localize_log(
     unknown_allowed: bool = False,
     unknown_penalty: float = 0.0,
     recovery_injection: float = 0.0,
+    restart_after: int = 0,
+    min_ess: float = 0.0,
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
@@ -287,6 +291,12 @@ def localize_log(
     recovery_injection : float
         Fraction of random particles injected at each resampling while the
         state is ``lost`` (see :func:`localize.mcl.run_filter`).
+    restart_after : int
+        Global localization again after this many updates agreed on a place
+        where the scans do not fit (0: never; see :func:`localize.mcl.run_filter`).
+    min_ess : float
+        Adaptive tempering: no update leaves fewer than ``min_ess * N``
+        effective particles (see :class:`~localize.mcl.MCL`).
 
     Returns
     -------
@@ -309,7 +319,7 @@ def localize_log(
     motion = ReversibleOdometry(alphas)
     opts: dict[str, Any] = dict(resample_threshold=resample_threshold, injection=injection,
                                 free_space_only=free_space_only, augmented=augmented, kld=kld,
-                                unknown_allowed=unknown_allowed, unknown_penalty=unknown_penalty)
+                                unknown_allowed=unknown_allowed, unknown_penalty=unknown_penalty, min_ess=min_ess)
     if init == "global":
         f = MCL.uniform(grid, n_particles, motion, model, rng=rng, **opts)
     else:
@@ -325,6 +335,7 @@ def localize_log(
     tr = run_filter(f, k_scans, lambda k: (odo[k - 1], odo[k]), lambda k: (ranges[k], angles), grid=grid,
                     min_motion=tuple(min_motion), rules=rules, snapshot_steps=snap_steps,
                     snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
+                    restart_after=restart_after,
                     callback=None if progress is None else progress.update)
     spread = np.sqrt(tr.stds[:, 0] ** 2 + tr.stds[:, 1] ** 2)
     return RunResult(times=np.asarray(log.times), estimates=tr.poses, spread=spread, n_eff=tr.n_eff,
@@ -615,6 +626,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="while the state is 'lost', replace the fraction F of the particles by random ones at each "
                         f"resampling, so that the filter searches again (default {DEFAULTS['recovery']:g}). "
                         "Example: --recovery 0")
+    f.add_argument("--restart-after", type=int, default=DEFAULTS["restart_after"], metavar="K",
+                   help="start global localization again (all --particles re-drawn over the map) when the cloud "
+                        "has agreed on one place but the scans have not fitted the map there for K updates in a "
+                        f"row: it is confidently wrong (default {DEFAULTS['restart_after']}; 0 never). "
+                        "Example: --restart-after 5")
+    f.add_argument("--min-ess", type=_nonneg_float, default=DEFAULTS["min_ess"], metavar="F",
+                   help="adaptive tempering: no single scan may leave fewer than F*N effective particles, so the "
+                        "first scans cannot collapse the cloud onto a look-alike place (default "
+                        f"{DEFAULTS['min_ess']:g}; 0 off). Example: --min-ess 0.1")
     f.add_argument("--track", action="store_true",
                    help="pose tracking instead of global localization: start around the log's first reference "
                         "pose (needs a corrected log).")
@@ -665,7 +685,8 @@ def run_kwargs(args: argparse.Namespace) -> dict:
 
     kld = None
     if args.kld > 0:
-        kld = KLDSampling(epsilon=args.kld, n_min=min(args.min_particles, args.particles), n_max=args.particles)
+        kld = KLDSampling(epsilon=args.kld, n_min=min(args.min_particles, args.particles), n_max=args.particles,
+                          chunked=True)
     slow, fast = args.augmented
     aug = None
     if slow > 0 or fast > 0:
@@ -680,6 +701,7 @@ def run_kwargs(args: argparse.Namespace) -> dict:
         max_range=args.max_range, init="reference" if args.track else "global", min_motion=tuple(args.min_motion),
         injection=args.injection, temper=args.temper, sensor_params={"sigma_hit": args.sigma_hit},
         min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
+        restart_after=max(int(args.restart_after), 0), min_ess=args.min_ess,
         unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"],
     )
 

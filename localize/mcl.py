@@ -982,9 +982,16 @@ class MCL:
             new = self.particles[idx]
         else:
             # n_max i.i.d. draws in random order: every prefix is an i.i.d. sample (PR table 8.4)
-            draws = _rs.multinomial(w, self.rng, n=self.kld.n_max)
-            cand = self.particles[self.rng.permutation(draws)]
-            m = kld_sample_size(cand, self.kld.bin_size, self.kld.epsilon, self.kld.delta, self.kld.n_min)
+            sizes = [self.kld.n_max]
+            if self.kld.chunked:
+                first = min(self.kld.n_max, max(4 * self.kld.n_min, 2 * self.n))
+                sizes = [first] + ([self.kld.n_max] if first < self.kld.n_max else [])
+            for size in sizes:
+                draws = _rs.multinomial(w, self.rng, n=size)
+                cand = self.particles[self.rng.permutation(draws)]
+                m = kld_sample_size(cand, self.kld.bin_size, self.kld.epsilon, self.kld.delta, self.kld.n_min)
+                if m < size:
+                    break
             new = cand[:m]
         n = new.shape[0]
         n_inj = int(round(self.injection * n))
@@ -1293,13 +1300,16 @@ class StateRules:
       hypothesis, not several look-alike places);
     * the best cluster's position spread is below ``max_spread`` metres and
       its heading spread below ``max_heading_std`` radians;
-    * the scan *fits* the map at the estimate: the share of valid beams whose
-      end points lie within ``fit_distance`` of an obstacle is at least
-      ``min_fit`` times the share the sensor model expects on a correct pose
-      (``z_hit * P(|N(0, sigma_hit^2)| < fit_distance)``, see
-      :func:`expected_fit`). A filter can agree with itself on a wrong place
-      (a converged cloud in a corridor the scan does not match); the fit
-      catches that.
+    * the scans *fit* the map at the estimate: the share of valid beams whose
+      reading agrees with the range ray-cast in the map from the estimate
+      within ``fit_distance`` (default ``2 * sigma_hit``), averaged over the
+      last ``fit_window`` updates, is at least ``min_fit`` times the share
+      the sensor model expects on a correct pose (``z_hit * P(|N(0,
+      sigma_hit^2)| < fit_distance)``, see :func:`expected_fit`). A filter
+      can agree with itself on a wrong place (a converged cloud in a room
+      that looks alike); the fit catches most of that, because the
+      likelihood field never checks whether a beam passed through a wall,
+      and the ray cast does.
 
     The state starts ``searching``; ``hold`` confident updates in a row make it
     ``localized``. A localized filter turns ``lost`` after ``hold_lost``
@@ -1317,14 +1327,15 @@ class StateRules:
     min_share: float = 0.8
     max_spread: float = 0.5
     max_heading_std: float = 0.35
-    min_fit: float = 0.6
+    min_fit: float = 0.75
     fit_distance: float | None = None
+    fit_window: int = 5
     hold: int = 3
     hold_lost: int = 3
 
     def __post_init__(self) -> None:
-        if int(self.min_beams) < 1 or int(self.hold) < 1 or int(self.hold_lost) < 1:
-            raise ValueError("min_beams, hold and hold_lost must be whole numbers >= 1")
+        if min(int(self.min_beams), int(self.hold), int(self.hold_lost), int(self.fit_window)) < 1:
+            raise ValueError("min_beams, hold, hold_lost and fit_window must be whole numbers >= 1")
         if not 0.0 < self.min_share <= 1.0:
             raise ValueError(f"min_share must lie in (0, 1]; got {self.min_share!r}")
         if not 0.0 <= self.min_fit <= 1.0:
@@ -1482,6 +1493,7 @@ def run_filter(
     snapshot_particles: int | None = None,
     recover: bool = True,
     recovery_injection: float = 0.0,
+    restart_after: int = 0,
     odometry: ArrayLike | None = None,
     callback: Callable[[int], None] | None = None,
 ) -> RunTrace:
@@ -1538,6 +1550,13 @@ def run_filter(
         While the state is ``lost``, replace this fraction of the particles by
         random ones at each resampling (in [0, 1)): the filter searches the
         map again instead of insisting on the place it lost.
+    restart_after : int
+        Global localization again (0: never): when the cloud has agreed on one
+        place (best cluster share and spread within the rules) but the scans
+        have not fitted the map there for this many updates in a row, the
+        filter is confidently wrong. All particles are re-drawn uniformly --
+        as many as at the start (``kld.n_max`` with KLD-sampling) -- and
+        ``events`` says so.
     odometry : array_like (T, 3), optional
         Odometry pose at each step, for the gating (default: the second pose of
         each odometry control).
@@ -1571,6 +1590,10 @@ def run_filter(
     if not 0.0 <= float(recovery_injection) < 1.0:
         raise ValueError(f"recovery_injection must be a fraction in [0, 1); got {recovery_injection!r}")
     base_injection = mcl.injection
+    n_restart = mcl.kld.n_max if mcl.kld is not None else mcl.n
+    poor = 0
+    recent: list[float] = []
+    fit_s = float("nan")
     t = int(n_steps)
     if t < 1:
         raise ValueError(f"n_steps must be >= 1; got {n_steps!r}")
@@ -1658,7 +1681,22 @@ def run_filter(
         if do_update and grid is not None and n_valid[k] > 0 and _is_scan(z):
             fit[k] = _scan_fit(caster, pose, offset, ranges[valid], angles[valid], fit_d, rules.min_beams)
         off_map = grid is not None and on_map[k] == 0.0
-        if recover and (degenerate or off_map) and mcl.sampler is not None:
+        agreed = e.best_weight >= rules.min_share and e.spread <= rules.max_spread
+        if do_update and np.isfinite(fit[k]):
+            recent = (recent + [float(fit[k])])[-int(rules.fit_window):]
+            fit_s = float(np.mean(recent))
+            poor = poor + 1 if (agreed and fit_s < rules.min_fit * fit_expected) else 0
+        if restart_after and poor >= restart_after and mcl.sampler is not None:
+            mcl.particles = np.asarray(mcl.sampler(n_restart, mcl.rng), dtype=float)
+            mcl.log_weights = np.full(n_restart, -np.log(n_restart))
+            events.append((k, f"the cloud agreed on a place where the scans have not fitted the map for {poor} "
+                              f"updates: {n_restart} particles re-drawn over the map (global localization again)"))
+            poor = 0
+            good = 0
+            recent, fit_s = [], float("nan")
+            if cur == "localized":
+                cur = "lost"
+        elif recover and (degenerate or off_map) and mcl.sampler is not None:
             mcl.particles = np.asarray(mcl.sampler(mcl.n, mcl.rng), dtype=float)
             mcl.log_weights = np.full(mcl.n, -np.log(mcl.n))
             why = "every particle got zero likelihood" if degenerate else "every particle left the map's free space"
@@ -1680,7 +1718,7 @@ def run_filter(
             confident = ((not _is_scan(z) or n_valid[k] >= rules.min_beams) and e.best_weight >= rules.min_share
                          and e.spread <= rules.max_spread
                          and (e.cluster_std is None or e.cluster_std[2] <= rules.max_heading_std)
-                         and (np.isnan(fit[k]) or fit[k] >= rules.min_fit * fit_expected))
+                         and (np.isnan(fit_s) or fit_s >= rules.min_fit * fit_expected))
             if confident:
                 good += 1
                 bad = 0
