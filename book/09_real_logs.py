@@ -404,8 +404,11 @@ err = np.hypot(*(est[:, :2] - run.poses[:, :2]).T)
 print("exit status:", status)
 print("scans:", summary["scans"], " particles:", summary["particles"])
 print("particle cloud converged (spread < 0.5 m) at scan:", summary["convergence_step"])
-print("error against the simulator's truth: converged at scan", cli.converged_at(err, 0.5),
-      f"| median error afterwards {np.median(err[cli.converged_at(err, 0.5):]):.2f} m")
+print("the filter's own account:", cli.headline(summary))
+k_loc = summary["state"]["first_localized_scan"]
+if k_loc is not None:
+    ok = np.mean(err[k_loc:] < 0.5)
+    print(f"against the simulator's truth, from scan {k_loc} on: {ok:.0%} of the estimates within 0.5 m")
 
 # %%
 fig, ax = plt.subplots(figsize=(8, 4.2))
@@ -448,6 +451,80 @@ plt.show()
 # almost a metre forward while the corrected poses move backward — a filter
 # without recovery loses the robot there (chapter 8 is the cure).
 #
+# ### Searching, localized, lost: what the filter can know
+#
+# Every row of `trajectory.csv` carries a `state`, and `summary.json` a `state`
+# section (first localized scan, lost intervals, final state); the terminal's
+# headline reads "localized from scan K; lost at scans ...", and errors against a
+# reference are reported only for the scans the filter called localized. The
+# state uses no ground truth, only evidence the filter has
+# (`localize.mcl.StateRules`):
+#
+# * **one hypothesis** — the best cluster holds at least 80% of the weight, with a
+#   position spread under 0.5 m and a heading spread under 20 degrees;
+# * **the scans fit the map there** — the share of beams whose reading agrees
+#   with the range ray-cast in the map from the estimate (within twice
+#   `sigma_hit`), averaged over five updates, is at least 60% of what the sensor
+#   model expects on a correct pose. The likelihood field never asks whether a
+#   beam passed *through* a wall, so a cloud can agree with itself on a wrong
+#   room; the ray cast does ask;
+# * **readings the sensor can make** — at least five per scan between
+#   `--min-range` and `--max-range`. A laser that reads 0 (or only "no return")
+#   everywhere gives no evidence: the run ends "NOT localized", not "converged at
+#   scan 89";
+# * **particles on the map and likelihoods above zero** — if every particle got
+#   zero likelihood or left the free space (a corrupt odometry record), the
+#   filter says so and starts over. An odometry step longer than the map's
+#   diagonal is rejected as a corrupt record (`events` in `summary.json`).
+#
+# Three confident updates in a row make the state *localized*; three that are
+# not make it *lost*.
+
+# %% [markdown]
+# ### Defaults for maps that disagree with the scans
+#
+# Real maps are drawn with walls 0.1–0.15 m too thick, doors open or shut,
+# furniture moved and parts left unknown. The command line's defaults
+# (`localize.cli.DEFAULTS`, each explained in `localize run --help`) follow from
+# that physics, not from one data set:
+#
+# * **`--particles 50000 --kld 0.05 --min-particles 2000`** — a dense initial
+#   cloud, shrunk by KLD-sampling once the filter agrees. In a building of
+#   500–1000 m² a 0.5 m x 0.5 m x 10° cell of the pose space holds, with 5,000
+#   uniform particles, a particle only about once in twenty: the filter then
+#   depends on luck to have any particle near the truth. The big cloud costs
+#   only the first few scans.
+# * **`--sigma-hit 0.2`** — the map's error (0.1–0.15 m), not the laser's (a
+#   few cm), sets the width of the hit term; **`--temper 0.3`** — 30 beams are
+#   not 30 independent measurements (neighbouring beams see the same wall).
+# * **unknown cells are not obstacles for the likelihood field** — an end point
+#   in unknown space (beyond the outer walls of a map built from scans, or in a
+#   region the map leaves unknown) gets one neutral score, the same for every
+#   pose; counted as obstacles they would reward every wrong pose whose beams
+#   "pass through" an outer wall. Particles may stand in unknown cells (the robot
+#   drives there), at a small penalty per update so that few leak outside.
+# * **`--restart-after 5`** — when the cloud has agreed on a place where the
+#   scans have not fitted the map for five updates, it is confidently wrong:
+#   global localization starts again with the full cloud.
+# * **`--min-range 0.05`** — readings at or below 5 cm are failures, not
+#   evidence (ROS AMCL's `laser_min_range`).
+#
+# `benchmarks/bench_global.py` measures them on every real log this project has
+# — the Intel lab, Freiburg 079, ACES and CSAIL with maps built from their
+# corrected poses and then degraded (walls grown, obstacles added and removed, a
+# region unknown), with the raw odometry, from many start scans and seeds — and
+# on the Willow Garage map with simulated scans. Its table (from
+# `benchmarks/RESULTS.md`, so this cell needs no data) also counts the runs whose
+# state *ended* "localized" while more than 1 m off:
+
+# %%
+results = Path("../benchmarks/RESULTS.md")
+text = results.read_text() if results.exists() else ""
+section = text[text.find("## bench_global"):] if "## bench_global" in text else ""
+section = section[:section.find("\n## ", 3)] if "\n## " in section[3:] else section
+print(section.strip() or "benchmarks/RESULTS.md has no bench_global section yet")
+
+# %% [markdown]
 # On speed (`benchmarks/bench_cli.py`): a CMU-sized log — 700 scans of 180
 # beams over 135 s, an 800 x 800 map — runs, including reading the files, at
 # tens of times real time with 1,000 particles, and faster than real time with
@@ -465,6 +542,9 @@ plt.show()
 # * Bad input is an error with a file and a line, never a half-read result.
 # * Real maps and scans disagree by 0.1 m or more: choose `sigma_hit` for the map,
 #   not for the laser, and temper the likelihood.
+# * A filter must say when it does not know: searching, localized or lost, from
+#   the cluster weight, the spread and whether the scans fit the map — and a
+#   global localizer needs a dense initial cloud (KLD-sampling shrinks it).
 # * With known poses, a map is a sum of log-odds (occupancy grid mapping).
 
 # %% [markdown]
