@@ -769,6 +769,9 @@ def _cmd_run(args, out: TextIO, err: TextIO) -> int:
         "alphas": list(args.alphas), "sigma_hit": args.sigma_hit, "temper": args.temper,
         "min_motion": list(args.min_motion),
         "injection": args.injection, "init": "reference" if args.track else "global",
+        "min_range": args.min_range, "kld": args.kld, "min_particles": args.min_particles,
+        "augmented": list(args.augmented), "recovery": args.recovery, "restart_after": args.restart_after,
+        "min_ess": args.min_ess,
         "scans": None if args.scans is None else [args.scans.start, args.scans.stop, args.scans.step],
     }
     summary = summarize(res, log, args.particles, ref, settings)

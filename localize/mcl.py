@@ -1666,7 +1666,7 @@ def run_filter(
             n_valid[k] = int(valid.sum())
         if do_update:
             mcl.update(*z)
-            evals += int(n_p[k]) * int(np.size(angles))
+            evals += int(n_p[k]) * (int(np.size(z[1])) if _is_scan(z) else 1)
             last_odom = where
         if k in keep:
             w = mcl.weights

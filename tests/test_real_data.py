@@ -138,10 +138,11 @@ def test_global_localization_converges_in_most_seeds(logs, built, name, n_scans,
     sub = logs[name].select(slice(0, n_scans * every, every))
     steps = []
     for seed in range(3):
-        res = cli.localize_log(built[name], sub, n_particles=10000, rng=np.random.default_rng(seed))  # CLI defaults
+        kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-"]))  # CLI defaults
+        res = cli.localize_log(built[name], sub, rng=np.random.default_rng(seed), **kw)
         err = np.hypot(*(res.estimates[:, :2] - sub.poses[:, :2]).T)
         steps.append(cli.converged_at(err, 0.5, hold=20))
-    print(f"\n{name} global localization, 10000 particles, CLI defaults, every {every} scan(s): "
+    print(f"\n{name} global localization, CLI defaults, every {every} scan(s): "
           f"converged at scans {steps}")
     ok = [s is not None and s <= within for s in steps]
     assert sum(ok) >= 2, steps
