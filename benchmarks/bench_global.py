@@ -197,14 +197,23 @@ def _pct(v, q):
     return float(np.percentile(v, q)) if len(v) else float("nan")
 
 
+def times_reliable(name: str) -> bool:
+    """Whether a log's time stamps give its duration (some CARMEN logs keep only 6 significant digits)."""
+    if name == "willow":
+        return True
+    t = np.asarray(load(name)[0].times)
+    return bool(t[-1] > t[0] and np.mean(np.diff(t) < 0) < 0.01 and np.unique(t).size / t.size > 0.5)
+
+
 def summarize(rows: list[dict]) -> list[dict]:
     out = []
-    for name in dict.fromkeys(r["name"] for r in rows):
+    order = {n: i for i, n in enumerate([*LOGS, "willow"])}
+    for name in sorted(dict.fromkeys(r["name"] for r in rows), key=lambda n: order.get(n, 99)):
         rs = [r for r in rows if r["name"] == name]
         conv = [r["converged_at"] for r in rs if r["success"]]
         after = [r["error_after"] for r in rs if r["success"]]
         ok = sum(r["success"] for r in rs)
-        rtf = [r["rtf"] for r in rs if r["rtf"]]
+        rtf = [r["rtf"] for r in rs if r["rtf"]] if times_reliable(name) else []
         out.append({
             "log": name, "runs": len(rs), "success": f"{ok}/{len(rs)} ({100.0 * ok / len(rs):.0f}%)",
             "scans to conv. median": f"{_pct(conv, 50):.0f}" if conv else "-",

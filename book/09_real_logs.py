@@ -433,19 +433,18 @@ plt.show()
 # `trajectory.csv` gains `ref_x,ref_y,ref_theta,error` columns):
 #
 # ```bash
-# localize run --log ../shared/data/carmen/intel-corrected.log.gz --build-map --particles 10000 --out out/intel
+# localize run --log ../shared/data/carmen/intel-corrected.log.gz --build-map --out out/intel
 # ```
 #
 # What the test suite measures on the real logs (`tests/test_real_data.py`):
 # starting from the first corrected pose, MCL with the real odometry increments
 # tracks the Intel robot over all 910 scans with a median position error of
 # about 8 cm against the corrected poses (Freiburg 079, first 800 scans: about
-# 5 cm). From a uniform start with 10,000 particles and the command line's
-# defaults, global localization converged (error below 0.5 m for 20 scans in a
-# row) in each of the six seeds we tried: within 60 scans on the Intel log, and
-# within 180 scans (using every fourth scan) on Freiburg 079; afterwards the
-# median error is about 0.26 m on Intel and 0.1 m on Freiburg. With 8,000
-# particles some seeds fail: the number of particles that global localization
+# 5 cm). Global localization from a uniform start, with the command line's
+# defaults, on maps that are *right* (built from the log's own corrected poses)
+# converges in most seeds within 100 scans on Intel and 200 (every fourth scan)
+# on Freiburg 079. Maps that are wrong the way real maps are wrong are harder:
+# the benchmark below. The number of particles that global localization
 # needs grows with the size and the self-similarity of the building. Real logs also hold surprises no
 # noise model explains: at scans 837-846 of Freiburg 079 the odometry reports
 # almost a metre forward while the corrected poses move backward — a filter

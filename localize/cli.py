@@ -12,12 +12,16 @@ predict with the odometry motion between scans, weight with a range sensor
 model, resample. It writes
 
 * ``DIR/trajectory.csv`` — one row per scan: ``time,x,y,theta`` (the robot
-  centre in the map frame, metres and radians; the weighted mean of the
-  particles), then ``spread`` (the particles' position standard deviation,
-  metres) and ``n_eff``; with reference poses in the log also
+  centre in the map frame, metres and radians; the mean of the heaviest
+  cluster of particles), then ``spread`` (the particles' position standard
+  deviation, metres), ``n_eff`` and ``state`` (``searching``, ``localized``
+  or ``lost``, from the filter's own evidence: see
+  :class:`localize.mcl.StateRules`); with reference poses in the log also
   ``ref_x,ref_y,ref_theta,error``;
 * ``DIR/summary.json`` — particles, scans, seconds per scan, real-time factor,
-  convergence step, and the settings used;
+  the ``state`` section (first localized scan, lost intervals, final state,
+  events such as rejected odometry records), errors against the reference
+  while localized, and the settings used;
 * ``DIR/particles.gif`` (with ``--animate``; ``.mp4`` too when ``ffmpeg`` exists).
 
 ``map`` builds an occupancy grid map from a log with known (corrected) poses
@@ -51,7 +55,7 @@ examples:
   localize run --map wean.dat --log robotdata1.log --out out/wean
 
   # a CARMEN log with corrected poses: build the map from them, then localize globally
-  localize run --log intel-corrected.log.gz --build-map --particles 5000 --out out/intel
+  localize run --log intel-corrected.log.gz --build-map --out out/intel
 
   # the same in two steps, keeping the map (ROS map_server YAML + PGM)
   localize map --log intel-corrected.log.gz --out intel.yaml
@@ -572,8 +576,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use only these scans of the log (Python slice). Example: --scans 0:500 or --scans ::2")
     f = run.add_argument_group("filter")
     f.add_argument("--particles", type=_positive_int, default=DEFAULTS["particles"], metavar="N",
-                   help="number of particles (default 5000; global localization in a large building may "
-                        "need 10000 or more). Example: --particles 10000")
+                   help="number of particles at the start (default 50000). With --kld (on by default) this is "
+                        "the initial and largest number: a dense uniform cloud, because in a building of "
+                        "500-1000 m^2 fewer particles leave most 0.5 m x 0.5 m x 10 degree cells of the pose "
+                        "space empty, and the filter then needs luck to have a particle near the robot. "
+                        "KLD-sampling shrinks the cloud to a few thousand once the filter agrees. "
+                        "Example: --particles 100000")
     f.add_argument("--seed", type=int, default=0, metavar="S",
                    help="seed of the random generator: the same seed gives the same run (default 0). "
                         "Example: --seed 7")
