@@ -1560,9 +1560,11 @@ def run_filter(
         Global localization again (0: never): when the cloud has agreed on one
         place (best cluster share and spread within the rules) but the scans
         have not fitted the map there for this many updates in a row, the
-        filter is confidently wrong. All particles are re-drawn uniformly --
-        as many as at the start (``kld.n_max`` with KLD-sampling) -- and
-        ``events`` says so.
+        filter is probably confidently wrong. As many uniform particles as at
+        the start (``kld.n_max`` with KLD-sampling) are added beside the
+        current cloud, each half of the weight: if the old place was right it
+        keeps winning, if not the new particles find the robot. ``events``
+        says so.
     odometry : array_like (T, 3), optional
         Odometry pose at each step, for the gating (default: the second pose of
         each odometry control).
@@ -1693,10 +1695,15 @@ def run_filter(
             fit_s = float(np.mean(recent))
             poor = poor + 1 if (agreed and fit_s < rules.restart_fit * fit_expected) else 0
         if restart_after and poor >= restart_after and mcl.sampler is not None:
-            mcl.particles = np.asarray(mcl.sampler(n_restart, mcl.rng), dtype=float)
-            mcl.log_weights = np.full(n_restart, -np.log(n_restart))
+            # global localization again, without throwing the current hypothesis away: the old cloud keeps
+            # half of the weight, n_restart uniform particles share the other half; the next scans decide
+            fresh = np.asarray(mcl.sampler(n_restart, mcl.rng), dtype=float)
+            mcl.particles = np.vstack([mcl.particles, fresh])
+            mcl.log_weights = np.concatenate([mcl.log_weights + np.log(0.5),
+                                              np.full(n_restart, np.log(0.5 / n_restart))])
             events.append((k, f"the cloud agreed on a place where the scans have not fitted the map for {poor} "
-                              f"updates: {n_restart} particles re-drawn over the map (global localization again)"))
+                              f"updates: {n_restart} particles drawn over the map beside it (global "
+                              "localization again)"))
             poor = 0
             good = 0
             recent, fit_s = [], float("nan")
