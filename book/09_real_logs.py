@@ -439,8 +439,8 @@ plt.show()
 # What the test suite measures on the real logs (`tests/test_real_data.py`):
 # starting from the first corrected pose, MCL with the real odometry increments
 # tracks the Intel robot over all 910 scans with a median position error of
-# about 8 cm against the corrected poses (Freiburg 079, first 800 scans: about
-# 5 cm). Global localization from a uniform start, with the command line's
+# about 4 cm against the corrected poses (Freiburg 079, first 800 scans: also
+# about 4 cm). Global localization from a uniform start, with the command line's
 # defaults, on maps that are *right* (built from the log's own corrected poses)
 # converges in most seeds within 100 scans on Intel and 200 (every fourth scan)
 # on Freiburg 079. Maps that are wrong the way real maps are wrong are harder:

@@ -551,7 +551,8 @@ def build_parser() -> argparse.ArgumentParser:
         "run", help="global localization with MCL on a log",
         description="Global localization with Monte Carlo Localization: particles start uniform over the map's "
                     "free space and are moved by the log's odometry and weighted by its laser scans. Writes "
-                    "DIR/trajectory.csv (time,x,y,theta per scan, map frame, metres and radians), "
+                    "DIR/trajectory.csv (time,x,y,theta per scan, map frame, metres and radians, and the filter's state: "
+                    "searching, localized or lost), "
                     "DIR/summary.json and, with --animate, DIR/particles.gif.",
         epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = run.add_argument_group("input")
@@ -599,11 +600,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 0.05 0.01 0.02 0.05). Example: --alphas 0.1 0.02 0.05 0.1")
     f.add_argument("--sigma-hit", type=_positive_float, default=DEFAULTS["sigma_hit"], metavar="M",
                    help="standard deviation of a beam's end point about the nearest wall (likelihood field) or "
-                        "of a reading about the ray-cast range (beam model), metres (default 0.3: real maps are "
-                        "off by 0.1-0.15 m and furniture moves). Example: --sigma-hit 0.2")
+                        "of a reading about the ray-cast range (beam model), metres (default "
+                        f"{DEFAULTS['sigma_hit']:g}): the map's error sets it, not the laser's (a few cm) -- real "
+                        "maps draw walls 0.1-0.15 m off and furniture moves. Example: --sigma-hit 0.3")
     f.add_argument("--temper", type=_positive_float, default=DEFAULTS["temper"], metavar="T",
-                   help="multiply each scan's log-likelihood by T in (0, 1] (default 0.05): beams are not "
-                        "independent, and an over-confident filter locks onto a wrong place. Example: --temper 0.2")
+                   help="multiply each scan's log-likelihood by T in (0, 1] (default "
+                        f"{DEFAULTS['temper']:g}): neighbouring beams see the same wall, so 30 beams are not 30 "
+                        "independent measurements, and an over-confident filter locks onto a wrong place. "
+                        "Example: --temper 0.1")
     f.add_argument("--min-motion", type=_nonneg_float, nargs=2, default=DEFAULTS["min_motion"], metavar=("M", "RAD"),
                    help="weight the particles only after moving M metres or turning RAD radians since the last "
                         "update, like ROS AMCL (default 0.2 0.3; 0 0 updates at every scan). "
