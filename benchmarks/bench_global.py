@@ -109,7 +109,8 @@ def load(name: str, root: Path | None = None):
         return _DATA[name]
     root = data_root() if root is None else root
     if name == "willow":
-        g = io.read_map(root / "willow" / "willow-2010-02-18-0.10.yaml", not_free="occupied")
+        # grey walls (100-200) are walls; the unknown outside (205) stays unknown (see localize.io.ros)
+        g = io.read_map(root / "willow" / "willow-2010-02-18-0.10.yaml", occupied_thresh=0.2)
         _DATA[name] = (None, g)
     else:
         log = io.read_log(root / "carmen" / f"{name}-corrected.log.gz")
