@@ -229,19 +229,25 @@ def summarize(rows: list[dict]) -> list[dict]:
 
 
 def write_section(text: str) -> None:
+    """Put ``text`` (starting with "## bench_global") into RESULTS.md: in place of the old section, or
+    before the first benchmark section that sorts after it (the order of run_all.py)."""
+    import re
+
     path = HERE / "RESULTS.md"
     old = path.read_text() if path.exists() else "# Benchmark results\n"
-    head = "## bench_global"
-    if head in old:
-        a = old.index(head)
-        b = old.find("\n## ", a + len(head))
-        old = old[:a] + old[b + 1:] if b >= 0 else old[:a]
-    # keep the sections in alphabetical order like run_all.py
-    parts = old.split("\n## ")
-    body = [p for p in parts[1:]]
-    body.append(text[3:].strip() + "\n")
-    body.sort(key=lambda p: p.split("\n", 1)[0])
-    path.write_text(parts[0].rstrip() + "\n\n## " + "\n## ".join(b.rstrip() + "\n" for b in body))
+    heads = [(m.start(), m.group(1)) for m in re.finditer(r"^## (bench_\w+)", old, flags=re.M)]
+    body = text.strip() + "\n\n"
+    mine = [i for i, (_, name) in enumerate(heads) if name == "bench_global"]
+    if mine:
+        i = mine[0]
+        start = heads[i][0]
+        stop = heads[i + 1][0] if i + 1 < len(heads) else len(old)
+        new = old[:start] + body + old[stop:]
+    else:
+        after = [pos for pos, name in heads if name > "bench_global"]
+        pos = after[0] if after else len(old)
+        new = old[:pos] + body + old[pos:]
+    path.write_text(new)
 
 
 def main(argv=None) -> int:

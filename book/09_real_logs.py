@@ -399,7 +399,7 @@ else:
 status = cli.main(["run", "--map", str(map_file), "--log", str(log_file), "--particles", "3000",
                    "--seed", "0", "--out", str(folder / "out"), "--quiet"])
 summary = json.loads((folder / "out" / "summary.json").read_text())
-est = np.loadtxt(folder / "out" / "trajectory.csv", delimiter=",", skiprows=1)[:, 1:4]
+est = np.loadtxt(folder / "out" / "trajectory.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
 err = np.hypot(*(est[:, :2] - run.poses[:, :2]).T)
 print("exit status:", status)
 print("scans:", summary["scans"], " particles:", summary["particles"])
@@ -497,11 +497,15 @@ plt.show()
 #   few cm), sets the width of the hit term; **`--temper 0.3`** — 30 beams are
 #   not 30 independent measurements (neighbouring beams see the same wall).
 # * **unknown cells are not obstacles for the likelihood field** — an end point
-#   in unknown space (beyond the outer walls of a map built from scans, or in a
-#   region the map leaves unknown) gets one neutral score, the same for every
-#   pose; counted as obstacles they would reward every wrong pose whose beams
-#   "pass through" an outer wall. Particles may stand in unknown cells (the robot
-#   drives there), at a small penalty per update so that few leak outside.
+#   is scored by its distance to the nearest *known* obstacle, and one off the
+#   map as a miss, as ROS AMCL does. Counted as obstacles, unknown cells would
+#   give a perfect score to every beam that ends beyond the outer walls of a map
+#   built from scans, which rewards wrong poses whose beams "pass through" a
+#   wall. (A neutral score for unknown space, `unknown_neutral=True`, is fairer
+#   to a robot inside an unknown region but makes the outside of the building
+#   attractive to wrong poses; it did no better on the benchmark.) Particles may
+#   stand in unknown cells (the robot drives there), at a small penalty per
+#   update so that few leak outside.
 # * **`--restart-after 5`** — when the cloud has agreed on a place where the
 #   scans have not fitted the map for five updates, it is confidently wrong:
 #   global localization starts again with the full cloud.
@@ -522,6 +526,19 @@ text = results.read_text() if results.exists() else ""
 section = text[text.find("## bench_global"):] if "## bench_global" in text else ""
 section = section[:section.find("\n## ", 3)] if "\n## " in section[3:] else section
 print(section.strip() or "benchmarks/RESULTS.md has no bench_global section yet")
+
+# %% [markdown]
+# The target of the issue that asked for this benchmark — 95% success on every
+# log — is not reached: about three runs in four succeed on the Intel and ACES
+# logs, nine in ten on CSAIL, six in ten on Freiburg 079 (its robot drives only
+# about 9 m in the first 30% of a 300-scan run) and about one in eight on the
+# Willow map, a large cubicle floor whose simulated scans see little more than
+# the nearest partition (median range about 2 m). What the table does show is
+# honesty: on the real logs no run ended "localized" while more than 1 m off;
+# the failures end "lost" or "searching", and say so. On these runs the
+# defaults before this chapter's changes (5,000 particles, `temper` 0.05,
+# `sigma_hit` 0.3, unknown cells counted as obstacles) succeeded in 1 of 20
+# runs of a quick subset (4 starts x 1 seed per log).
 
 # %% [markdown]
 # On speed (`benchmarks/bench_cli.py`): a CMU-sized log — 700 scans of 180

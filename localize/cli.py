@@ -161,7 +161,8 @@ def make_sensor(kind: str, grid: OccupancyGrid, max_range: float, sensor_offset:
     from . import sensors
 
     if kind == "likelihood":
-        kw: dict[str, Any] = dict(z_hit=0.9, z_rand=0.1, sigma_hit=0.3, unknown_is_obstacle=False)
+        kw: dict[str, Any] = dict(z_hit=0.9, z_rand=0.1, sigma_hit=0.3, unknown_is_obstacle=False,
+                                  unknown_neutral=False)
         kw.update(params)
         return sensors.LikelihoodField(grid, max_range, sensor_offset=tuple(sensor_offset), **kw)
     if kind == "beam":

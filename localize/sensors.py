@@ -533,9 +533,16 @@ class LikelihoodField:
         ``True``, every beam that ends in unknown space -- beyond the outer
         walls of a map built from scans -- scores as a perfect hit, which
         rewards wrong poses whose scans seem to pass through walls. With
-        ``False``, end points in unknown cells and off the map get one
-        neutral score, the same for every pose: that of an end point dropped
-        at a random place of the known map (``unknown_log_prob``).
+        ``False``, end points in unknown cells are scored by their distance
+        to the nearest known obstacle, and end points off the map as at
+        ``max_dist``.
+    unknown_neutral : bool
+        With ``unknown_is_obstacle=False``: give end points in unknown cells
+        and off the map one neutral score instead, the same for every pose --
+        that of an end point dropped at a random place of the known map
+        (``unknown_log_prob``). Fair to a robot inside an unknown region, but
+        it also makes the outside of a building attractive to wrong poses;
+        the command line leaves it off (measured in ``benchmarks/bench_global.py``).
 
     Examples
     --------
