@@ -162,7 +162,7 @@ def make_sensor(kind: str, grid: OccupancyGrid, max_range: float, sensor_offset:
 
     if kind == "likelihood":
         kw: dict[str, Any] = dict(z_hit=0.9, z_rand=0.1, sigma_hit=0.3, unknown_is_obstacle=False,
-                                  unknown_neutral=False)
+                                  unknown_neutral=True)
         kw.update(params)
         return sensors.LikelihoodField(grid, max_range, sensor_offset=tuple(sensor_offset), **kw)
     if kind == "beam":

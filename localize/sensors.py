@@ -534,15 +534,14 @@ class LikelihoodField:
         walls of a map built from scans -- scores as a perfect hit, which
         rewards wrong poses whose scans seem to pass through walls. With
         ``False``, end points in unknown cells are scored by their distance
-        to the nearest known obstacle, and end points off the map as at
-        ``max_dist``.
+        to the nearest known obstacle; end points off the map always score as
+        at ``max_dist`` (a miss, as in ROS AMCL).
     unknown_neutral : bool
         With ``unknown_is_obstacle=False``: give end points in unknown cells
-        and off the map one neutral score instead, the same for every pose --
-        that of an end point dropped at a random place of the known map
-        (``unknown_log_prob``). Fair to a robot inside an unknown region, but
-        it also makes the outside of a building attractive to wrong poses;
-        the command line leaves it off (measured in ``benchmarks/bench_global.py``).
+        one neutral score instead, the same for every pose -- that of an end
+        point dropped at a random place of the known map
+        (``unknown_log_prob``): the map says nothing there. The command line
+        uses it (measured in ``benchmarks/bench_global.py``).
 
     Examples
     --------
@@ -609,13 +608,14 @@ class LikelihoodField:
         rows, cols = g.shape
         cells = self.point_log_prob(g.distance_field)
         outside = float(self.point_log_prob(self.max_dist))
-        if not g.unknown_is_obstacle and self.unknown_neutral:
-            # the map says nothing about unknown cells and the world off the map: an end point there
-            # scores like one dropped at a random place of the known map (the same for every pose)
-            known = ~g.unknown
-            outside = float(np.log(np.mean(np.exp(cells[known])))) if known.any() else outside
-            cells = np.where(known, cells, outside)
         self.unknown_log_prob = outside
+        if not g.unknown_is_obstacle and self.unknown_neutral:
+            # the map says nothing about its unknown cells: an end point there scores like one dropped at a
+            # random place of the known map (the same for every pose). Off the map it is a miss, as in AMCL.
+            known = ~g.unknown
+            if known.any() and not known.all():
+                self.unknown_log_prob = float(np.log(np.mean(np.exp(cells[known]))))
+                cells = np.where(known, cells, self.unknown_log_prob)
         table = np.full((rows + 2 * pad, cols + 2 * pad), outside)
         table[pad:pad + rows, pad:pad + cols] = cells
         self._pad = pad
@@ -664,8 +664,8 @@ class LikelihoodField:
                     continue
                 ex, ey = x + zk * math.cos(th + ak), y + zk * math.sin(th + ak)
                 g = self.grid
-                if not g.unknown_is_obstacle and self.unknown_neutral and (not g.contains([ex, ey]) or g.unknown[tuple(
-                        g.world_to_cell([ex, ey]))]):
+                if not g.unknown_is_obstacle and self.unknown_neutral and bool(g.contains([ex, ey])) and g.unknown[
+                        tuple(g.world_to_cell([ex, ey]))]:
                     q += self.unknown_log_prob          # the map says nothing here
                     continue
                 d = g.distance_at([ex, ey], outside=self.max_dist)
