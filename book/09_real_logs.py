@@ -399,13 +399,17 @@ else:
 status = cli.main(["run", "--map", str(map_file), "--log", str(log_file), "--particles", "3000",
                    "--seed", "0", "--out", str(folder / "out"), "--quiet"])
 summary = json.loads((folder / "out" / "summary.json").read_text())
-est = np.loadtxt(folder / "out" / "trajectory.csv", delimiter=",", skiprows=1)[:, 1:4]
+est = np.loadtxt(folder / "out" / "trajectory.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
 err = np.hypot(*(est[:, :2] - run.poses[:, :2]).T)
 print("exit status:", status)
 print("scans:", summary["scans"], " particles:", summary["particles"])
 print("particle cloud converged (spread < 0.5 m) at scan:", summary["convergence_step"])
-print("error against the simulator's truth: converged at scan", cli.converged_at(err, 0.5),
-      f"| median error afterwards {np.median(err[cli.converged_at(err, 0.5):]):.2f} m")
+print("the filter's own account:", cli.headline(summary))
+k_loc = summary["state"]["first_localized_scan"]
+if k_loc is not None:
+    ok = np.mean(err[k_loc:] < 0.5)
+    share = "at least 90%" if ok >= 0.9 else f"{ok:.0%}"   # a share of ~100 scans: no finer than that
+    print(f"against the simulator's truth, from scan {k_loc} on: {share} of the estimates within 0.5 m")
 
 # %%
 fig, ax = plt.subplots(figsize=(8, 4.2))
@@ -430,24 +434,113 @@ plt.show()
 # `trajectory.csv` gains `ref_x,ref_y,ref_theta,error` columns):
 #
 # ```bash
-# localize run --log ../shared/data/carmen/intel-corrected.log.gz --build-map --particles 10000 --out out/intel
+# localize run --log ../shared/data/carmen/intel-corrected.log.gz --build-map --out out/intel
 # ```
 #
 # What the test suite measures on the real logs (`tests/test_real_data.py`):
 # starting from the first corrected pose, MCL with the real odometry increments
 # tracks the Intel robot over all 910 scans with a median position error of
-# about 8 cm against the corrected poses (Freiburg 079, first 800 scans: about
-# 5 cm). From a uniform start with 10,000 particles and the command line's
-# defaults, global localization converged (error below 0.5 m for 20 scans in a
-# row) in each of the six seeds we tried: within 60 scans on the Intel log, and
-# within 180 scans (using every fourth scan) on Freiburg 079; afterwards the
-# median error is about 0.26 m on Intel and 0.1 m on Freiburg. With 8,000
-# particles some seeds fail: the number of particles that global localization
+# about 4 cm against the corrected poses (Freiburg 079, first 800 scans: also
+# about 4 cm). Global localization from a uniform start, with the command line's
+# defaults, on maps that are *right* (built from the log's own corrected poses)
+# converges in most seeds within 100 scans on Intel and 200 (every fourth scan)
+# on Freiburg 079. Maps that are wrong the way real maps are wrong are harder:
+# the benchmark below. The number of particles that global localization
 # needs grows with the size and the self-similarity of the building. Real logs also hold surprises no
 # noise model explains: at scans 837-846 of Freiburg 079 the odometry reports
 # almost a metre forward while the corrected poses move backward — a filter
 # without recovery loses the robot there (chapter 8 is the cure).
 #
+# ### Searching, localized, lost: what the filter can know
+#
+# Every row of `trajectory.csv` carries a `state`, and `summary.json` a `state`
+# section (first localized scan, lost intervals, final state); the terminal's
+# headline reads "localized from scan K; lost at scans ...", and errors against a
+# reference are reported only for the scans the filter called localized. The
+# state uses no ground truth, only evidence the filter has
+# (`localize.mcl.StateRules`):
+#
+# * **one hypothesis** — the best cluster holds at least 80% of the weight, with a
+#   position spread under 0.5 m and a heading spread under 20 degrees;
+# * **the scans fit the map there** — the share of beams whose reading agrees
+#   with the range ray-cast in the map from the estimate (within twice
+#   `sigma_hit`), averaged over five updates, is at least 60% of what the sensor
+#   model expects on a correct pose. The likelihood field never asks whether a
+#   beam passed *through* a wall, so a cloud can agree with itself on a wrong
+#   room; the ray cast does ask;
+# * **readings the sensor can make** — at least five per scan between
+#   `--min-range` and `--max-range`. A laser that reads 0 (or only "no return")
+#   everywhere gives no evidence: the run ends "NOT localized", not "converged at
+#   scan 89";
+# * **particles on the map and likelihoods above zero** — if every particle got
+#   zero likelihood or left the free space (a corrupt odometry record), the
+#   filter says so and starts over. An odometry step longer than the map's
+#   diagonal is rejected as a corrupt record (`events` in `summary.json`).
+#
+# Three confident updates in a row make the state *localized*; three that are
+# not make it *lost*.
+
+# %% [markdown]
+# ### Defaults for maps that disagree with the scans
+#
+# Real maps are drawn with walls 0.1–0.15 m too thick, doors open or shut,
+# furniture moved and parts left unknown. The command line's defaults
+# (`localize.cli.DEFAULTS`, each explained in `localize run --help`) follow from
+# that physics, not from one data set:
+#
+# * **`--particles 50000 --kld 0.05 --min-particles 2000`** — a dense initial
+#   cloud, shrunk by KLD-sampling once the filter agrees. In a building of
+#   500–1000 m² a 0.5 m x 0.5 m x 10° cell of the pose space holds, with 5,000
+#   uniform particles, a particle only about once in twenty: the filter then
+#   depends on luck to have any particle near the truth. The big cloud costs
+#   only the first few scans.
+# * **`--sigma-hit 0.2`** — the map's error (0.1–0.15 m), not the laser's (a
+#   few cm), sets the width of the hit term; **`--temper 0.3`** — 30 beams are
+#   not 30 independent measurements (neighbouring beams see the same wall).
+# * **unknown cells are not obstacles for the likelihood field** — an end point
+#   in an unknown cell (beyond the outer walls of a map built from scans, or in
+#   a region the map leaves unknown) gets one neutral score, the same for every
+#   pose: the map says nothing there. Counted as obstacles, unknown cells would
+#   give a perfect score to every beam that ends beyond an outer wall, which
+#   rewards wrong poses whose beams "pass through" walls. An end point off the
+#   map is a miss, as in ROS AMCL. Particles may stand in unknown cells (the
+#   robot drives there), at a small penalty per update so that few leak outside.
+# * **`--restart-after 5`** — when the cloud has agreed on a place where the
+#   scans have not fitted the map for five updates, it is confidently wrong:
+#   global localization starts again with the full cloud.
+# * **`--min-range 0.05`** — readings at or below 5 cm are failures, not
+#   evidence (ROS AMCL's `laser_min_range`).
+#
+# `benchmarks/bench_global.py` measures them on every real log this project has
+# — the Intel lab, Freiburg 079, ACES and CSAIL with maps built from their
+# corrected poses and then degraded (walls grown, obstacles added and removed, a
+# region unknown), with the raw odometry, from many start scans and seeds — and
+# on the Willow Garage map with simulated scans. Its table (from
+# `benchmarks/RESULTS.md`, so this cell needs no data) also counts the runs whose
+# state *ended* "localized" while more than 1 m off:
+
+# %%
+results = Path("../benchmarks/RESULTS.md")
+text = results.read_text() if results.exists() else ""
+section = text[text.find("## bench_global"):] if "## bench_global" in text else ""
+section = section[:section.find("\n## ", 3)] if "\n## " in section[3:] else section
+print(section.strip() or "benchmarks/RESULTS.md has no bench_global section yet")
+
+# %% [markdown]
+# The target of the issue that asked for this benchmark — 95% success on every
+# log — is reached on CSAIL only: about nine runs in ten succeed on the Intel
+# and ACES logs, six in ten on Freiburg 079 (its robot drives only about 9 m in
+# the first 30% of a 300-scan run) and about one in eight on the Willow map, a
+# large cubicle floor whose simulated scans see little more than the nearest
+# partition (median range about 2 m). What the table does show is honesty: on
+# the real logs no run ended "localized" while more than 1 m off; their
+# failures end "lost" or "searching" and say so (on Willow two of sixty did
+# not). With the defaults before this chapter's changes (5,000 particles,
+# `temper` 0.05, `sigma_hit` 0.3, unknown cells counted as obstacles) the same
+# benchmark succeeded in 1 of 20 runs of a quick subset (4 starts x 1 seed per
+# log).
+
+# %% [markdown]
 # On speed (`benchmarks/bench_cli.py`): a CMU-sized log — 700 scans of 180
 # beams over 135 s, an 800 x 800 map — runs, including reading the files, at
 # tens of times real time with 1,000 particles, and faster than real time with
@@ -729,6 +822,9 @@ fig
 # * Bad input is an error with a file and a line, never a half-read result.
 # * Real maps and scans disagree by 0.1 m or more: choose `sigma_hit` for the map,
 #   not for the laser, and temper the likelihood.
+# * A filter must say when it does not know: searching, localized or lost, from
+#   the cluster weight, the spread and whether the scans fit the map — and a
+#   global localizer needs a dense initial cloud (KLD-sampling shrinks it).
 # * With known poses, a map is a sum of log-odds (occupancy grid mapping).
 
 # %% [markdown]

@@ -12,12 +12,16 @@ predict with the odometry motion between scans, weight with a range sensor
 model, resample. It writes
 
 * ``DIR/trajectory.csv`` — one row per scan: ``time,x,y,theta`` (the robot
-  centre in the map frame, metres and radians; the weighted mean of the
-  particles), then ``spread`` (the particles' position standard deviation,
-  metres) and ``n_eff``; with reference poses in the log also
+  centre in the map frame, metres and radians; the mean of the heaviest
+  cluster of particles), then ``spread`` (the particles' position standard
+  deviation, metres), ``n_eff`` and ``state`` (``searching``, ``localized``
+  or ``lost``, from the filter's own evidence: see
+  :class:`localize.mcl.StateRules`); with reference poses in the log also
   ``ref_x,ref_y,ref_theta,error``;
 * ``DIR/summary.json`` — particles, scans, seconds per scan, real-time factor,
-  convergence step, and the settings used;
+  the ``state`` section (first localized scan, lost intervals, final state,
+  events such as rejected odometry records), errors against the reference
+  while localized, and the settings used;
 * ``DIR/particles.gif`` (with ``--animate``; ``.mp4`` too when ``ffmpeg`` exists).
 
 ``DIR`` always holds one complete run or none (:mod:`localize._output`): the
@@ -60,13 +64,11 @@ from numpy.typing import ArrayLike, NDArray
 from . import __version__
 from ._output import RunOutput
 from ._resources import check_memory
-from .geometry import relative
 from .grid import OccupancyGrid
 from .mcl import ReversibleOdometry  # re-exported: it lived here before moving next to OdometryMotion
 
 if TYPE_CHECKING:
-    from .kld import KLDSampling
-    from .mcl import Augmented
+    pass
 
 __all__ = ["main", "build_parser", "RunResult", "localize_log", "make_sensor", "Progress", "ReversibleOdometry",
            "converged_at"]
@@ -85,7 +87,7 @@ examples:
   localize run --map wean.dat --log robotdata1.log --out out/wean --animate
 
   # a CARMEN log with corrected poses: build the map from them, then localize globally
-  localize run --log intel-corrected.log.gz --build-map --particles 10000 --out out/intel
+  localize run --log intel-corrected.log.gz --build-map --out out/intel
 
   # the same in two steps, keeping the map (ROS map_server YAML + PGM)
   localize map --log intel-corrected.log.gz --out intel.yaml
@@ -94,6 +96,29 @@ examples:
   # a ROS map whose walls are painted grey (see `localize.io.ros`)
   localize run --map willow.yaml --not-free-is-occupied --log sim.log
 """
+
+
+# ============================================================================ defaults
+#: The defaults of ``localize run`` (see its --help and chapter 9 for the reasons behind each).
+DEFAULTS: dict[str, Any] = {
+    "particles": 50000,
+    "sensor": "likelihood",
+    "beams": 30,
+    "max_range": 30.0,
+    "alphas": (0.05, 0.01, 0.02, 0.05),
+    "sigma_hit": 0.2,
+    "temper": 0.3,
+    "min_motion": (0.2, 0.3),
+    "injection": 0.0,
+    "min_range": 0.05,
+    "kld": 0.05,
+    "min_particles": 2000,
+    "augmented": (0.0, 0.0),
+    "recovery": 0.0,
+    "restart_after": 5,
+    "min_ess": 0.0,
+    "unknown_penalty": 1.0,
+}
 
 
 # ============================================================================ progress
@@ -168,7 +193,8 @@ def make_sensor(kind: str, grid: OccupancyGrid, max_range: float, sensor_offset:
     from . import sensors
 
     if kind == "likelihood":
-        kw: dict[str, Any] = dict(z_hit=0.9, z_rand=0.1, sigma_hit=0.3)
+        kw: dict[str, Any] = dict(z_hit=0.9, z_rand=0.1, sigma_hit=0.3, unknown_is_obstacle=False,
+                                  unknown_neutral=True)
         kw.update(params)
         return sensors.LikelihoodField(grid, max_range, sensor_offset=tuple(sensor_offset), **kw)
     if kind == "beam":
@@ -183,7 +209,12 @@ def make_sensor(kind: str, grid: OccupancyGrid, max_range: float, sensor_offset:
 
 @dataclass
 class RunResult:
-    """What :func:`localize_log` returns: per-scan estimates and run statistics."""
+    """What :func:`localize_log` returns: per-scan estimates, the honest state and run statistics.
+
+    ``state[k]`` is ``searching``, ``localized`` or ``lost`` (see
+    :class:`localize.mcl.StateRules`); ``trace`` is the run driver's full record
+    (:class:`localize.mcl.RunTrace`).
+    """
 
     times: NDArray[np.float64]
     estimates: NDArray[np.float64]
@@ -193,6 +224,8 @@ class RunResult:
     seconds: float
     snapshots: dict = field(default_factory=dict)
     covariances: NDArray[np.float64] | None = None  # (K, 3, 3) of the particles, per scan
+    state: NDArray[np.str_] | None = None
+    trace: Any = None
 
     @property
     def seconds_per_scan(self) -> float:
@@ -219,10 +252,21 @@ def localize_log(
     snapshot_particles: int = 1000,
     progress: Progress | None = None,
     sensor_params: dict | None = None,
-    kld: KLDSampling | None = None,
-    augmented: Augmented | None = None,
+    min_range: float = 0.0,
+    augmented: Any = None,
+    kld: Any = None,
+    rules: Any = None,
+    unknown_allowed: bool = False,
+    unknown_penalty: float = 0.0,
+    recovery_injection: float = 0.0,
+    restart_after: int = 0,
+    min_ess: float = 0.0,
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
+
+    The filtering loop is :func:`localize.mcl.run_filter`, the one run driver
+    (update gating, estimates, the searching / localized / lost state); this
+    function only builds the filter from the command line's settings.
 
     Parameters
     ----------
@@ -231,7 +275,7 @@ def localize_log(
     log : LaserLog
         Scans and odometry (the controls are consecutive odometry poses).
     n_particles : int
-        Number of particles.
+        Number of particles (with ``kld``: the initial number).
     rng : numpy.random.Generator
         The only source of randomness (required).
     sensor : {"likelihood", "beam"}
@@ -270,15 +314,35 @@ def localize_log(
         Updated after each scan.
     sensor_params : dict, optional
         Extra keyword arguments of the sensor model.
-    kld, augmented : optional
-        KLD-sampling (:class:`~localize.kld.KLDSampling`) and augmented MCL
-        (:class:`~localize.mcl.Augmented`) settings of :class:`~localize.mcl.MCL`.
+    min_range : float
+        Readings at or below this range (metres) are not evidence (likelihood
+        field; AMCL's ``laser_min_range``).
+    augmented : localize.mcl.Augmented or (alpha_slow, alpha_fast), optional
+        Augmented MCL (random particles when the scans suddenly fit worse).
+    kld : localize.kld.KLDSampling, optional
+        KLD-sampling: the particle count adapts to the spread of the belief.
+    rules : localize.mcl.StateRules, optional
+        Thresholds of the honest state.
+    unknown_allowed : bool
+        With ``free_space_only``, let particles stand in unknown cells too.
+    unknown_penalty : float
+        Log-likelihood subtracted per update from particles in unknown cells
+        (see :class:`~localize.mcl.MCL`).
+    recovery_injection : float
+        Fraction of random particles injected at each resampling while the
+        state is ``lost`` (see :func:`localize.mcl.run_filter`).
+    restart_after : int
+        Global localization again after this many updates agreed on a place
+        where the scans do not fit (0: never; see :func:`localize.mcl.run_filter`).
+    min_ess : float
+        Adaptive tempering: no update leaves fewer than ``min_ess * N``
+        effective particles (see :class:`~localize.mcl.MCL`).
 
     Returns
     -------
     RunResult
     """
-    from .mcl import MCL
+    from .mcl import MCL, run_filter
 
     if rng is None or not isinstance(rng, np.random.Generator):
         raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
@@ -287,11 +351,15 @@ def localize_log(
     if beams is not None and beams < log.n_beams:
         log = log.select_beams(count=beams)
     mr = log.max_range if max_range is None else min(float(max_range), log.max_range)
-    model = make_sensor(sensor, grid, mr, log.sensor_offset, temper=temper, **(sensor_params or {}))
+    params = dict(sensor_params or {})
+    if sensor == "likelihood" and min_range:
+        params.setdefault("min_range", float(min_range))
+    model = make_sensor(sensor, grid, mr, log.sensor_offset, temper=temper, **params)
     ranges = np.minimum(log.ranges, mr)
     motion = ReversibleOdometry(alphas)
     opts: dict[str, Any] = dict(resample_threshold=resample_threshold, injection=injection,
-                                free_space_only=free_space_only, kld=kld, augmented=augmented)
+                                free_space_only=free_space_only, augmented=augmented, kld=kld,
+                                unknown_allowed=unknown_allowed, unknown_penalty=unknown_penalty, min_ess=min_ess)
     if init == "global":
         f = MCL.uniform(grid, n_particles, motion, model, rng=rng, **opts)
     else:
@@ -299,39 +367,22 @@ def localize_log(
             raise ValueError("init='reference' needs reference poses in the log (log.poses is None)")
         f = MCL.gaussian(log.poses[0], tuple(init_std), n_particles, motion, model, rng=rng, grid=grid, **opts)
     k_scans = len(log)
-    est = np.zeros((k_scans, 3))
-    spread = np.zeros(k_scans)
-    covs = np.zeros((k_scans, 3, 3))
-    neff = np.zeros(k_scans)
-    updated = np.zeros(k_scans, dtype=bool)
-    snaps: dict = {}
-    d_min, a_min = (float(v) for v in min_motion)
-    last_update_odom = None
-    t0 = time.perf_counter()
-    for k in range(k_scans):
-        u = None if k == 0 else (log.odometry[k - 1], log.odometry[k])
-        do_update = True
-        if last_update_odom is not None and (d_min > 0 or a_min > 0):
-            m = relative(last_update_odom, log.odometry[k])
-            do_update = bool(np.hypot(m[0], m[1]) >= d_min or abs(m[2]) >= a_min)
-        if do_update:
-            e = f.step(u, ranges[k], log.angles)
-            last_update_odom = log.odometry[k]
-        else:
-            e = f.step(u)
-        updated[k] = do_update
-        est[k] = e.pose if np.all(np.isfinite(e.pose)) else e.mean
-        spread[k] = float(np.sqrt(e.cov[0, 0] + e.cov[1, 1]))
-        covs[k] = e.cov
-        neff[k] = f.status.n_eff
-        if snapshot_every and (k % snapshot_every == 0 or k == k_scans - 1):
-            sub = np.linspace(0, f.n - 1, min(f.n, snapshot_particles)).astype(int)
-            snaps[k] = (f.particles[sub].copy(), f.weights[sub].copy())
-        if progress is not None:
-            progress.update(k + 1)
-    seconds = time.perf_counter() - t0
-    return RunResult(times=np.asarray(log.times), estimates=est, spread=spread, n_eff=neff, updated=updated,
-                     seconds=seconds, snapshots=snaps, covariances=covs)
+    snap_steps: Sequence[int] = ()
+    if snapshot_every:
+        snap_steps = sorted(set(range(0, k_scans, snapshot_every)) | {k_scans - 1})
+    odo = log.odometry
+    angles = log.angles
+    tr = run_filter(f, k_scans, lambda k: (odo[k - 1], odo[k]), lambda k: (ranges[k], angles), grid=grid,
+                    min_motion=tuple(min_motion), rules=rules, snapshot_steps=snap_steps,
+                    snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
+                    restart_after=restart_after,
+                    callback=None if progress is None else progress.update)
+    spread = np.sqrt(tr.stds[:, 0] ** 2 + tr.stds[:, 1] ** 2)
+    covs = np.zeros((k_scans, 3, 3))  # the particles' spread per scan (x, y, theta variances), for the result bag
+    covs[:, [0, 1, 2], [0, 1, 2]] = tr.stds ** 2
+    return RunResult(times=np.asarray(log.times), estimates=tr.poses, spread=spread, n_eff=tr.n_eff,
+                     updated=tr.updated, seconds=tr.seconds, snapshots=tr.snapshots, covariances=covs,
+                     state=tr.state, trace=tr)
 
 
 # ============================================================================ outputs
@@ -363,8 +414,9 @@ def converged_at(values: ArrayLike, threshold: float = 0.5, hold: int = 20) -> i
 
 
 def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = None) -> Path:
-    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff`` (+ reference and error)."""
-    cols = ["time", "x", "y", "theta", "spread", "n_eff"]
+    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state`` (+ reference and error)."""
+    cols = ["time", "x", "y", "theta", "spread", "n_eff", "state"]
+    state = res.state if res.state is not None else np.full(len(res.times), "")
     if reference is not None:
         cols += ["ref_x", "ref_y", "ref_theta", "error"]
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
@@ -373,7 +425,7 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
         w.writerow(cols)
         for k in range(len(res.times)):
             row = [f"{res.times[k]:.6f}", *(f"{v:.6f}" for v in res.estimates[k]), f"{res.spread[k]:.4f}",
-                   f"{res.n_eff[k]:.1f}"]
+                   f"{res.n_eff[k]:.1f}", str(state[k])]
             if reference is not None:
                 row += [*(f"{v:.6f}" for v in reference[k]), f"{err[k]:.4f}"]
             w.writerow(row)
@@ -403,6 +455,11 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
     }
     if not reliable:
         out["real_time_factor_note"] = "the log's time stamps are not usable (too coarse or out of order)"
+    if res.trace is not None:
+        out["state"] = res.trace.state_summary()
+        out["state"]["meaning"] = ("searching: no single, well-fitting hypothesis yet; localized: one cluster holds "
+                                   "most of the weight, is tight, and the scans fit the map there; lost: it was "
+                                   "localized and no longer is (see localize.mcl.StateRules)")
     if reference is not None:
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
         cs = converged_at(err, threshold, hold)
@@ -411,6 +468,12 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
         out["median_error_after_convergence_m"] = (
             round(float(np.median(err[cs:])), 4) if cs is not None else None)
         out["final_error_m"] = round(float(err[-1]), 4)
+        if res.state is not None:
+            loc = res.state == "localized"
+            out["median_error_while_localized_m"] = round(float(np.median(err[loc])), 4) if loc.any() else None
+            out["p90_error_while_localized_m"] = (round(float(np.percentile(err[loc], 90)), 4)
+                                                  if loc.any() else None)
+            out["localized_scans_over_1m_off"] = int(np.sum(loc & (err > 1.0)))
     out["settings"] = settings
     return out
 
@@ -438,6 +501,35 @@ def map_summary(grid: OccupancyGrid) -> str:
     rows, cols = grid.shape
     return (f"{cols} x {rows} cells of {grid.resolution:g} m ({grid.width_m:g} x {grid.height_m:g} m): "
             f"{int(grid.free.sum())} free, {int(grid.occupied.sum())} occupied, {int(grid.unknown.sum())} unknown")
+
+
+def headline(summary: dict) -> str:
+    """The terminal's one-line account of the state: "localized from scan K; lost at ...; final state ...".
+
+    Examples
+    --------
+    >>> headline({"state": {"first_localized_scan": 12, "lost_intervals": [[40, 45]], "final_state": "localized",
+    ...                     "scans_without_valid_readings": 0, "events": []}})
+    'localized from scan 12; lost at scans 40-45; final state: localized'
+    >>> headline({"state": {"first_localized_scan": None, "lost_intervals": [], "final_state": "searching",
+    ...                     "scans_without_valid_readings": 90, "events": []}, "scans": 90})
+    'NOT localized: still searching at the end; 90 of 90 scans had no valid reading'
+    """
+    st = summary.get("state")
+    if not st:
+        return f"converged (particle spread < 0.5 m) at scan {summary.get('convergence_step')}"
+    k = st["first_localized_scan"]
+    parts = [f"localized from scan {k}" if k is not None else "NOT localized: still searching at the end"]
+    if st["lost_intervals"]:
+        parts.append("lost at scans " + ", ".join(f"{a}-{b}" for a, b in st["lost_intervals"]))
+    if k is not None:
+        parts.append(f"final state: {st['final_state']}")
+    if st.get("scans_without_valid_readings"):
+        parts.append(f"{st['scans_without_valid_readings']} of {summary.get('scans', '?')} scans had no valid reading")
+    rejected = sum("odometry" in t for _, t in st.get("events", []))
+    if rejected:
+        parts.append(f"{rejected} impossible odometry step(s) rejected")
+    return "; ".join(parts)
 
 
 def write_animation(out_dir: Path, grid: OccupancyGrid, res: RunResult, reference: NDArray | None,
@@ -587,7 +679,8 @@ def build_parser() -> argparse.ArgumentParser:
         "run", help="global localization with MCL on a log",
         description=_wrap("Global localization with Monte Carlo Localization: particles start uniform over the "
                           "map's free space and are moved by the log's odometry and weighted by its laser scans. "
-                          "Writes DIR/trajectory.csv (time,x,y,theta per scan, map frame, metres and radians), "
+                          "Writes DIR/trajectory.csv (time,x,y,theta per scan, map frame, metres and radians, and the "
+                          "filter's state: searching, localized or lost), "
                           "DIR/summary.json, DIR/trajectory.tum (for evo) and, with --animate, DIR/particles.gif; "
                           "for a ROS bag also DIR/localization.bag (ROS 1) or DIR/localization_bag/ (ROS 2) with "
                           "/amcl_pose and the particle cloud. The results appear together "
@@ -631,42 +724,78 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--scans", type=_scan_slice, default=None, metavar="START:STOP[:STEP]",
                    help="use only these scans of the log (Python slice). Example: --scans 0:500 or --scans ::2")
     f = run.add_argument_group("filter")
-    f.add_argument("--particles", type=_positive_int, default=5000, metavar="N",
-                   help="number of particles (default 5000; global localization in a large building may "
-                        "need 10000 or more). Example: --particles 10000")
+    f.add_argument("--particles", type=_positive_int, default=DEFAULTS["particles"], metavar="N",
+                   help="number of particles at the start (default 50000). With --kld (on by default) this is "
+                        "the initial and largest number: a dense uniform cloud, because in a building of "
+                        "500-1000 m^2 fewer particles leave most 0.5 m x 0.5 m x 10 degree cells of the pose "
+                        "space empty, and the filter then needs luck to have a particle near the robot. "
+                        "KLD-sampling shrinks the cloud to a few thousand once the filter agrees. "
+                        "Example: --particles 100000")
     f.add_argument("--seed", type=_seed, default=0, metavar="S",
                    help="seed of the random generator, a whole number >= 0: the same seed gives the same run "
                         "(default 0). "
                         "Example: --seed 7")
-    f.add_argument("--sensor", choices=["likelihood", "beam"], default="likelihood",
+    f.add_argument("--sensor", choices=["likelihood", "beam"], default=DEFAULTS["sensor"],
                    help="sensor model: 'likelihood' field (fast, robust to small map errors; default) or the "
                         "'beam' model with ray casting. Example: --sensor beam")
-    f.add_argument("--beams", type=_positive_int, default=30, metavar="B",
+    f.add_argument("--beams", type=_positive_int, default=DEFAULTS["beams"], metavar="B",
                    help="use B evenly spread beams of each scan (default 30). Example: --beams 180")
-    f.add_argument("--max-range", type=_positive_float, default=30.0, metavar="M",
+    f.add_argument("--max-range", type=_positive_float, default=DEFAULTS["max_range"], metavar="M",
                    help="sensor model's maximum range in metres; longer readings count as 'no return' "
                         "(default 30). Example: --max-range 20")
-    f.add_argument("--min-range", type=_nonneg_float, default=None, metavar="M",
-                   help="readings shorter than M metres count as 'no return' (AMCL's laser_min_range; default: "
-                        "none, a bag's range_min always applies). Example: --min-range 0.1")
-    f.add_argument("--alphas", type=_nonneg_float, nargs=4, default=(0.05, 0.01, 0.02, 0.05),
+    f.add_argument("--alphas", type=_nonneg_float, nargs=4, default=DEFAULTS["alphas"],
                    metavar=("A1", "A2", "A3", "A4"),
                    help="odometry noise alpha1..alpha4 of Probabilistic Robotics table 5.6, as variances "
                         "(default 0.05 0.01 0.02 0.05). Example: --alphas 0.1 0.02 0.05 0.1")
-    f.add_argument("--sigma-hit", type=_positive_float, default=0.3, metavar="M",
+    f.add_argument("--sigma-hit", type=_positive_float, default=DEFAULTS["sigma_hit"], metavar="M",
                    help="standard deviation of a beam's end point about the nearest wall (likelihood field) or "
-                        "of a reading about the ray-cast range (beam model), metres (default 0.3: real maps are "
-                        "off by 0.1-0.15 m and furniture moves). Example: --sigma-hit 0.2")
-    f.add_argument("--temper", type=_unit_fraction, default=0.05, metavar="T",
-                   help="multiply each scan's log-likelihood by T in (0, 1] (default 0.05): beams are not "
-                        "independent, and an over-confident filter locks onto a wrong place. Example: --temper 0.2")
-    f.add_argument("--min-motion", type=_nonneg_float, nargs=2, default=(0.2, 0.3), metavar=("M", "RAD"),
+                        "of a reading about the ray-cast range (beam model), metres (default "
+                        f"{DEFAULTS['sigma_hit']:g}): the map's error sets it, not the laser's (a few cm) -- real "
+                        "maps draw walls 0.1-0.15 m off and furniture moves. Example: --sigma-hit 0.3")
+    f.add_argument("--temper", type=_unit_fraction, default=DEFAULTS["temper"], metavar="T",
+                   help="multiply each scan's log-likelihood by T in (0, 1] (default "
+                        f"{DEFAULTS['temper']:g}): neighbouring beams see the same wall, so 30 beams are not 30 "
+                        "independent measurements, and an over-confident filter locks onto a wrong place. "
+                        "Example: --temper 0.1")
+    f.add_argument("--min-motion", type=_nonneg_float, nargs=2, default=DEFAULTS["min_motion"], metavar=("M", "RAD"),
                    help="weight the particles only after moving M metres or turning RAD radians since the last "
                         "update, like ROS AMCL (default 0.2 0.3; 0 0 updates at every scan). "
                         "Example: --min-motion 0 0")
-    f.add_argument("--injection", type=_fraction, default=0.0, metavar="F",
+    f.add_argument("--injection", type=_fraction, default=DEFAULTS["injection"], metavar="F",
                    help="fraction in [0, 1) of random particles injected at each resampling (default 0). "
                         "Example: --injection 0.01")
+    f.add_argument("--min-range", type=_nonneg_float, default=DEFAULTS["min_range"], metavar="M",
+                   help="readings at or below M metres are not evidence, like ROS AMCL's laser_min_range: lasers "
+                        "report 0 (or a few millimetres) for a failed reading, and nothing closer than the "
+                        f"robot's own body is real (default {DEFAULTS['min_range']:g}; likelihood field). "
+                        "Example: --min-range 0.1")
+    f.add_argument("--kld", type=_nonneg_float, default=DEFAULTS["kld"], metavar="EPS",
+                   help="KLD-sampling (Fox 2003): after each resampling keep only as many particles as a belief "
+                        "of this spread needs, with KL-divergence bound EPS; --particles is then the initial (and "
+                        "largest) number, so global localization starts with a dense cloud that shrinks once the "
+                        f"filter agrees (default {DEFAULTS['kld']:g}; 0 keeps the number fixed). Example: --kld 0.1")
+    f.add_argument("--min-particles", type=_positive_int, default=DEFAULTS["min_particles"], metavar="N",
+                   help=f"with --kld, never fewer than N particles (default {DEFAULTS['min_particles']}). "
+                        "Example: --min-particles 2000")
+    f.add_argument("--augmented", type=_nonneg_float, nargs=2, default=DEFAULTS["augmented"],
+                   metavar=("SLOW", "FAST"),
+                   help="augmented MCL (Probabilistic Robotics table 8.3): inject random particles when the "
+                        "short-term average scan likelihood (rate FAST) drops below the long-term one (rate SLOW); "
+                        "0 0 switches it off (default "
+                        f"{DEFAULTS['augmented'][0]:g} {DEFAULTS['augmented'][1]:g}). Example: --augmented 0.01 0.2")
+    f.add_argument("--recovery", type=_nonneg_float, default=DEFAULTS["recovery"], metavar="F",
+                   help="while the state is 'lost', replace the fraction F of the particles by random ones at each "
+                        f"resampling, so that the filter searches again (default {DEFAULTS['recovery']:g}). "
+                        "Example: --recovery 0")
+    f.add_argument("--restart-after", type=int, default=DEFAULTS["restart_after"], metavar="K",
+                   help="start global localization again (all --particles re-drawn over the map) when the cloud "
+                        "has agreed on one place but the scans have not fitted the map there for K updates in a "
+                        f"row: it is confidently wrong (default {DEFAULTS['restart_after']}; 0 never). "
+                        "Example: --restart-after 5")
+    f.add_argument("--min-ess", type=_nonneg_float, default=DEFAULTS["min_ess"], metavar="F",
+                   help="adaptive tempering: no single scan may leave fewer than F*N effective particles, so the "
+                        "first scans cannot collapse the cloud onto a look-alike place (default "
+                        f"{DEFAULTS['min_ess']:g}; 0 off). Example: --min-ess 0.1")
     f.add_argument("--track", action="store_true",
                    help="pose tracking instead of global localization: start around the log's first reference "
                         "pose (needs a corrected log).")
@@ -722,6 +851,45 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal.")
     run.set_defaults(_option_dests={s: a.dest for a in run._actions for s in a.option_strings})
     return ap
+
+
+# ============================================================================ main
+def run_kwargs(args: argparse.Namespace) -> dict:
+    """The keyword arguments of :func:`localize_log` that the ``run`` options stand for.
+
+    The benchmarks call this with the parser's defaults, so that they measure
+    exactly what ``localize run`` does.
+
+    Examples
+    --------
+    >>> args = build_parser().parse_args(["run", "--log", "x.log", "--map", "m.yaml"])
+    >>> run_kwargs(args)["n_particles"] == args.particles
+    True
+    """
+    from .kld import KLDSampling
+    from .mcl import Augmented
+
+    kld = None
+    if args.kld > 0:
+        kld = KLDSampling(epsilon=args.kld, n_min=min(args.min_particles, args.particles), n_max=args.particles,
+                          chunked=True)
+    slow, fast = args.augmented
+    aug = None
+    if slow > 0 or fast > 0:
+        try:
+            aug = Augmented(alpha_slow=slow, alpha_fast=fast, temperature=float(args.beams))
+        except ValueError as e:
+            raise ValueError(f"--augmented {slow:g} {fast:g}: {e}") from None
+    if not args.recovery < 1:
+        raise ValueError(f"--recovery must be a fraction below 1; got {args.recovery:g}")
+    return dict(
+        n_particles=args.particles, sensor=args.sensor, alphas=tuple(args.alphas), beams=args.beams,
+        max_range=args.max_range, init="reference" if args.track else "global", min_motion=tuple(args.min_motion),
+        injection=args.injection, temper=args.temper, sensor_params={"sigma_hit": args.sigma_hit},
+        min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
+        restart_after=max(int(args.restart_after), 0), min_ess=args.min_ess,
+        unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"],
+    )
 
 
 def _amcl_table() -> str:
@@ -897,29 +1065,35 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
     is_bag = log.format in lio.BAG_FORMATS
     frames = max(1, int(np.ceil(len(log) / args.frames))) if args.animate or is_bag else 0
     rng = np.random.default_rng(args.seed)
-    res = localize_log(
-        grid, log, n_particles=args.particles, rng=rng, sensor=args.sensor, alphas=tuple(args.alphas),
-        beams=args.beams, max_range=args.max_range, init="reference" if args.track else "global",
-        min_motion=tuple(args.min_motion), injection=args.injection, snapshot_every=frames, temper=args.temper,
-        progress=progress, sensor_params={**extras["sensor_params"], "sigma_hit": args.sigma_hit},
-        resample_threshold=extras["resample_threshold"], kld=extras["kld"], augmented=extras["augmented"])
+    kw = run_kwargs(args)
+    # an AMCL parameter file adds what the options cannot say (its sensor parameters, KLD bounds,
+    # recovery rates, resampling interval); options written on the command line still win
+    kw["sensor_params"] = {**extras["sensor_params"], **kw["sensor_params"]}
+    kw["resample_threshold"] = extras["resample_threshold"]
+    if extras["kld"] is not None:
+        kw["kld"] = extras["kld"]
+    if extras["augmented"] is not None:
+        kw["augmented"] = extras["augmented"]
+    res = localize_log(grid, log, rng=rng, snapshot_every=frames, progress=progress, **kw)
     progress.close()
     ref = log.poses
     write_trajectory(dest.path("trajectory.csv"), res, ref)
     outputs = _write_standard_outputs(dest.stage, res, log, err)
+    kld_used, aug_used = kw["kld"], kw["augmented"]
     settings = {
         "map": map_desc, "log": str(args.log), "log_format": log.format, "seed": args.seed,
         "sensor": args.sensor, "beams": min(args.beams, log.n_beams), "max_range": args.max_range,
         "alphas": list(args.alphas), "sigma_hit": args.sigma_hit, "temper": args.temper,
         "min_motion": list(args.min_motion),
         "injection": args.injection, "init": "reference" if args.track else "global",
+        "min_range": args.min_range, "min_particles": args.min_particles,
+        "recovery": args.recovery, "restart_after": args.restart_after, "min_ess": args.min_ess,
         "scans": None if args.scans is None else [args.scans.start, args.scans.stop, args.scans.step],
-        "laser_pose": [round(float(v), 6) for v in log.sensor_offset], "min_range": args.min_range,
-        "resample_threshold": extras["resample_threshold"],
-        "kld": None if extras["kld"] is None else {"epsilon": extras["kld"].epsilon, "delta": extras["kld"].delta,
-                                                     "n_min": extras["kld"].n_min, "n_max": extras["kld"].n_max},
-        "augmented": None if extras["augmented"] is None else [extras["augmented"].alpha_slow,
-                                                                 extras["augmented"].alpha_fast],
+        "laser_pose": [round(float(v), 6) for v in log.sensor_offset],
+        "resample_threshold": kw["resample_threshold"],
+        "kld": None if kld_used is None else {"epsilon": kld_used.epsilon, "delta": kld_used.delta,
+                                              "n_min": kld_used.n_min, "n_max": kld_used.n_max},
+        "augmented": None if aug_used is None else [aug_used.alpha_slow, aug_used.alpha_fast],
     }
     if "mapping" in extras:
         settings["amcl_params"] = extras["mapping"]
@@ -947,11 +1121,12 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
         lines = [
             f"{len(log)} scans, {args.particles} particles, {summary['seconds_per_scan'] * 1000:.1f} ms per scan"
             + (f", {rtf:g}x real time" if rtf else ""),
-            f"converged (particle spread < 0.5 m) at scan {summary['convergence_step']}",
+            headline(summary),
         ]
-        if ref is not None:
-            lines.append(f"against the log's reference poses: converged at scan "
-                         f"{summary['convergence_step_reference']}, median error {summary['median_error_m']} m")
+        if ref is not None and summary.get("median_error_while_localized_m") is not None:
+            lines.append(f"against the log's reference poses, while localized: median error "
+                         f"{summary['median_error_while_localized_m']} m, 90% {summary['p90_error_while_localized_m']} m"
+                         f" ({summary['localized_scans_over_1m_off']} localized scans more than 1 m off)")
         lines.append(f"wrote {', '.join(str(p) for p in written)}")
         print("\n".join(lines), file=out)
     return 0

@@ -210,6 +210,12 @@ class KLDSampling:
         Histogram bin of the pose space, (metres, metres, radians).
     n_min, n_max : int
         The particle count never falls below ``n_min`` nor exceeds ``n_max``.
+    chunked : bool
+        Draw the candidates in growing chunks (``max(4 n_min, 2 N)`` first,
+        then all ``n_max``) instead of all ``n_max`` at once. Same rule, same
+        distribution, far less work when ``n_max`` is a large initial cloud
+        and the belief has shrunk (the command line's setting); a different
+        random stream than the default.
 
     Examples
     --------
@@ -222,6 +228,7 @@ class KLDSampling:
     bin_size: tuple[float, float, float] = (0.5, 0.5, float(np.radians(10.0)))
     n_min: int = 200
     n_max: int = 20_000
+    chunked: bool = False
 
     def __post_init__(self) -> None:
         _check_eps_delta(self.epsilon, self.delta)

@@ -66,6 +66,11 @@ __all__ = [
     "mcl_step_loop",
     "MCLTrace",
     "run_mcl",
+    "run_filter",
+    "RunTrace",
+    "StateRules",
+    "STATES",
+    "expected_fit",
 ]
 
 Motion = Callable[[NDArray[np.float64], Any, np.random.Generator], NDArray[np.float64]]
@@ -282,6 +287,9 @@ class Estimate:
         Number of clusters holding at least 1% of the weight.
     n_eff : float
         Effective sample size ``1 / sum(w**2)``.
+    cluster_std : ndarray (3,)
+        Spread of the best cluster alone (like ``std``); :attr:`spread` is its
+        position part. With one cluster it equals ``std``.
 
     Examples
     --------
@@ -297,6 +305,13 @@ class Estimate:
     best_weight: float
     n_clusters: int
     n_eff: float
+    cluster_std: NDArray[np.float64] | None = None
+
+    @property
+    def spread(self) -> float:
+        """Position spread of the best cluster, ``sqrt(sx**2 + sy**2)`` in metres."""
+        s = self.std if self.cluster_std is None else self.cluster_std
+        return float(np.hypot(s[0], s[1]))
 
     @property
     def multimodal(self) -> bool:
@@ -390,15 +405,15 @@ def _estimate(p: NDArray, w: NDArray, cluster_size: float, min_share: float, mas
 
     labels, n_lab = _cluster_labels(p[:, :2], w, cluster_size, mass)
     if n_lab <= 1:
-        return Estimate(mean.copy(), mean, std, cov, 1.0, 1, n_eff)
+        return Estimate(mean.copy(), mean, std, cov, 1.0, 1, n_eff, std)
     inside = labels >= 0
     share = np.bincount(labels[inside], weights=w[inside], minlength=n_lab)
     best = int(np.argmax(share))
     sel = labels == best
     wb = w[sel] / share[best]
-    pose, _, _ = _weighted_stats(p[sel], wb)
+    pose, _, cstd = _weighted_stats(p[sel], wb)
     n_clusters = int(np.count_nonzero(share >= max(min_share, 1e-12)))
-    return Estimate(pose, mean, std, cov, float(share[best]), max(n_clusters, 1), n_eff)
+    return Estimate(pose, mean, std, cov, float(share[best]), max(n_clusters, 1), n_eff, cstd)
 
 
 def _cluster_labels(xy: NDArray, w: NDArray, size: float, mass: float) -> tuple[NDArray[np.int64], int]:
@@ -477,6 +492,7 @@ class MCLStatus:
     degenerate: bool = False
     n_degenerate: int = 0
     message: str = ""
+    beta: float = field(default=1.0, repr=False)
     log_w_slow: float = field(default=-np.inf, repr=False)
     log_w_fast: float = field(default=-np.inf, repr=False)
 
@@ -569,6 +585,27 @@ class MCL:
     free_space_only : bool
         Give zero weight to particles outside the known-free cells of ``grid``
         (robots cannot stand in walls).
+    unknown_allowed : bool
+        With ``free_space_only``: let particles stand in *unknown* cells too
+        (only known obstacles and the outside of the map are forbidden). Real
+        maps leave parts of a building unknown, and the robot drives there.
+    unknown_penalty : float
+        With ``unknown_allowed``: subtract this from the log-likelihood of
+        particles in unknown cells at each update (>= 0). A soft prior: when
+        the whole cloud is in an unknown region it changes nothing (every
+        particle pays it), but a few particles that wandered through a wall
+        into the unknown outside of a building lose against those inside.
+    min_ess : float
+        Adaptive tempering, in [0, 1): when one update would leave fewer than
+        ``min_ess * N`` effective particles, its log-likelihood is scaled by
+        the largest factor ``beta <= 1`` that keeps ``min_ess * N`` of them
+        (found by bisection; ``status.beta``). The annealing of Deutscher et
+        al. (2000) and of adaptive SMC samplers: no single scan may collapse
+        the cloud, so the outcome of global localization no longer hinges on
+        which few particles happened to fit the *first* scans best -- a
+        chance that grows with the number of particles (the best of more
+        random poses fits a look-alike place better). 0 (default) switches it
+        off.
     on_degenerate : {"keep", "reinitialize"}
         What to do when an update leaves every particle with zero weight:
         keep the particles and previous weights, ignoring the measurement
@@ -609,6 +646,9 @@ class MCL:
         grid: OccupancyGrid | None = None,
         free_space_only: bool = False,
         on_degenerate: str = "keep",
+        unknown_allowed: bool = False,
+        unknown_penalty: float = 0.0,
+        min_ess: float = 0.0,
     ) -> None:
         self.rng = _check_rng(rng)
         p = check_poses(particles, "particles")  # (N, 3); warns on a (3, 3) that looks transposed
@@ -677,8 +717,19 @@ class MCL:
         if free_space_only and grid is None:
             raise ValueError("free_space_only=True needs the map: pass grid=...")
         self.free_space_only = bool(free_space_only)
+        me = float(min_ess)
+        if not 0.0 <= me < 1.0:
+            raise ValueError(f"min_ess must be a fraction in [0, 1); got {min_ess!r}")
+        self.min_ess = me
+        pen = float(unknown_penalty)
+        if not (np.isfinite(pen) and pen >= 0):
+            raise ValueError(f"unknown_penalty must be a number >= 0; got {unknown_penalty!r}")
+        self.unknown_penalty = pen if (free_space_only and unknown_allowed) else 0.0
         if self.free_space_only:
-            self._free = np.ascontiguousarray(grid.free)
+            allowed = ~grid.occupied if unknown_allowed else grid.free
+            self._free = np.ascontiguousarray(allowed)
+            if self.unknown_penalty:
+                self._unknown = np.ascontiguousarray(grid.unknown)
         self.status = MCLStatus(n_particles=n, n_eff=self.n_eff)
 
     # ------------------------------------------------------------ constructors
@@ -824,6 +875,11 @@ class MCL:
             ll = np.where(bad, -np.inf, ll)
         if self.free_space_only:
             ll = np.where(self._in_free_space(self.particles), ll, -np.inf)
+            if self.unknown_penalty:
+                ll = ll - self.unknown_penalty * self._in_free_space(self.particles, self._unknown)
+        st.beta = 1.0
+        if self.min_ess > 0:
+            ll, st.beta = _adaptive_temper(self.log_weights, ll, self.min_ess * n)
         lw = self.log_weights + ll
         # log-sum-exp by hand: the shifted exponentials also give N_eff without a second pass
         top = float(lw.max())
@@ -849,6 +905,9 @@ class MCL:
                 f"every particle got zero likelihood: {what}"
             )
             st.n_eff = self.n_eff
+            if self.augmented is not None:
+                # the worst possible fit is exactly when augmented MCL must inject: w_avg = 0
+                self._update_averages(-np.inf)
         else:
             st.degenerate = False
             lw -= lnorm
@@ -862,6 +921,8 @@ class MCL:
         st = self.status
         lw = log_w_avg / a.temperature
         if st.log_w_slow == -np.inf:          # first measurement: start both averages at w_avg
+            if lw == -np.inf:                 # nothing to compare with yet
+                return
             st.log_w_slow = st.log_w_fast = lw
         st.log_w_slow = _ema_log(st.log_w_slow, lw, a.alpha_slow)
         st.log_w_fast = _ema_log(st.log_w_fast, lw, a.alpha_fast)
@@ -924,9 +985,16 @@ class MCL:
             new = self.particles[idx]
         else:
             # n_max i.i.d. draws in random order: every prefix is an i.i.d. sample (PR table 8.4)
-            draws = _rs.multinomial(w, self.rng, n=self.kld.n_max)
-            cand = self.particles[self.rng.permutation(draws)]
-            m = kld_sample_size(cand, self.kld.bin_size, self.kld.epsilon, self.kld.delta, self.kld.n_min)
+            sizes = [self.kld.n_max]
+            if self.kld.chunked:
+                first = min(self.kld.n_max, max(4 * self.kld.n_min, 2 * self.n))
+                sizes = [first] + ([self.kld.n_max] if first < self.kld.n_max else [])
+            for size in sizes:
+                draws = _rs.multinomial(w, self.rng, n=size)
+                cand = self.particles[self.rng.permutation(draws)]
+                m = kld_sample_size(cand, self.kld.bin_size, self.kld.epsilon, self.kld.delta, self.kld.n_min)
+                if m < size:
+                    break
             new = cand[:m]
         n = new.shape[0]
         n_inj = int(round(self.injection * n))
@@ -998,7 +1066,8 @@ class MCL:
         st.n_particles = self.n
         return est
 
-    def _in_free_space(self, poses: NDArray) -> NDArray[np.bool_]:
+    def _in_free_space(self, poses: NDArray, mask: NDArray | None = None) -> NDArray[np.bool_]:
+        mask = self._free if mask is None else mask
         g = self.grid
         rel = (poses[:, :2] - g.origin) / g.resolution
         j = np.floor(rel[:, 0]).astype(np.int64)
@@ -1006,7 +1075,7 @@ class MCL:
         h, w = self._free.shape
         ok = (i >= 0) & (i < h) & (j >= 0) & (j < w)
         out = np.zeros(poses.shape[0], dtype=bool)
-        out[ok] = self._free[i[ok], j[ok]]
+        out[ok] = mask[i[ok], j[ok]]
         return out
 
     def __repr__(self) -> str:
@@ -1046,6 +1115,8 @@ class MCLTrace:
     snapshots : dict[int, tuple[ndarray, ndarray]]
         ``step -> (particles, weights)`` after the update of that step,
         for the steps asked for.
+    state : ndarray (T,) of str
+        The run driver's honest state at each step (see :class:`StateRules`).
 
     Examples
     --------
@@ -1064,6 +1135,7 @@ class MCLTrace:
     p_inject: NDArray[np.float64]
     beam_evaluations: int
     snapshots: dict = field(default_factory=dict)
+    state: NDArray[np.str_] | None = None
 
     def __len__(self) -> int:
         return int(self.poses.shape[0])
@@ -1114,44 +1186,44 @@ def run_mcl(
     t = ranges.shape[0] if n_steps is None else int(n_steps)
     if not 1 <= t <= ranges.shape[0]:
         raise ValueError(f"n_steps must lie in [1, {ranges.shape[0]}]; got {n_steps!r}")
-    keep = {int(k) for k in snapshot_steps}
-    poses = np.zeros((t, 3))
-    means = np.zeros((t, 3))
-    stds = np.zeros((t, 3))
-    best = np.zeros(t)
-    n_p = np.zeros(t, dtype=np.int64)
-    n_eff = np.zeros(t)
-    res = np.zeros(t, dtype=bool)
-    deg = np.zeros(t, dtype=bool)
-    inj = np.zeros(t, dtype=np.int64)
-    p_inj = np.zeros(t)
-    evals = 0
-    snaps = {}
-    st = mcl.status
-    for k in range(t):
-        u = None if k == 0 else run.control(k)
-        n_p[k] = mcl.n
-        if k in keep:
-            # the snapshot needs the weighted set between update and resampling
-            st.resampled = False
-            st.n_injected = 0
-            if u is not None:
-                mcl.predict(u)
-            mcl.update(ranges[k], angles)
-            snaps[k] = (mcl.particles.copy(), mcl.weights)
-            e = mcl.estimate()
-            if mcl.needs_resampling():
-                mcl.resample()
-        else:
-            e = mcl.step(u, ranges[k], angles)
-        evals += int(n_p[k]) * angles.size
-        poses[k], means[k], stds[k], best[k] = e.pose, e.mean, e.std, e.best_weight
-        n_eff[k], res[k], deg[k] = e.n_eff, st.resampled, st.degenerate
-        inj[k], p_inj[k] = st.n_injected, st.p_inject
-    return MCLTrace(poses, means, stds, best, n_p, n_eff, res, deg, inj, p_inj, evals, snaps)
+    # the one driver, without gating or recovery: every step predicts and measures
+    tr = run_filter(mcl, t, run.control, lambda k: (ranges[k], angles), snapshot_steps=snapshot_steps,
+                    recover=False)
+    return MCLTrace(tr.poses, tr.means, tr.stds, tr.best_weight, tr.n_particles, tr.n_eff, tr.resampled,
+                    tr.degenerate, tr.n_injected, tr.p_inject, tr.beam_evaluations, tr.snapshots, tr.state)
 
 
 # --------------------------------------------------------------------------- helpers
+def _ess(lw: NDArray) -> float:
+    top = lw.max()
+    if not np.isfinite(top):
+        return 0.0
+    e = np.exp(lw - top)
+    return float(e.sum() ** 2 / (e @ e))
+
+
+def _adaptive_temper(log_w: NDArray, ll: NDArray, target: float) -> tuple[NDArray, float]:
+    """``(beta * ll, beta)`` with the largest ``beta`` in (0, 1] whose update keeps ``target`` effective particles.
+
+    ``-inf`` entries of ``ll`` (impossible poses) stay ``-inf`` at every ``beta``.
+    """
+    ok = np.isfinite(ll)
+    if _ess(log_w + ll) >= target:
+        return ll, 1.0
+    llf = np.where(ok, ll, 0.0)
+    base = np.where(ok, log_w, -np.inf)
+    if _ess(base) < target:                 # the impossible poses alone leave too few: use the bare mask
+        return np.where(ok, 0.0, -np.inf), 0.0
+    lo, hi = 0.0, 1.0
+    for _ in range(20):
+        mid = 0.5 * (lo + hi)
+        if _ess(base + mid * llf) >= target:
+            lo = mid
+        else:
+            hi = mid
+    return np.where(ok, lo * llf, -np.inf), lo
+
+
 def _ema_log(log_old: float, log_new: float, alpha: float) -> float:
     """``log((1 - alpha) * exp(log_old) + alpha * exp(log_new))`` without leaving log space."""
     return float(np.logaddexp(np.log1p(-alpha) + log_old, np.log(alpha) + log_new))
@@ -1213,3 +1285,524 @@ def mcl_step_loop(
             c += weights[i]
         out.append(moved[i])
     return np.array(out)
+
+
+# --------------------------------------------------------------------------- the run driver
+STATES = ("searching", "localized", "lost")
+
+
+@dataclass(frozen=True)
+class StateRules:
+    """When the run driver calls the filter *localized*, *searching* or *lost*, from its own evidence.
+
+    No ground truth is used: a scan counts as **confident** when
+
+    * the scan holds at least ``min_beams`` valid readings (between the
+      sensor's minimum and maximum range): no readings, no evidence;
+    * the best cluster holds at least ``min_share`` of the weight (one
+      hypothesis, not several look-alike places);
+    * the best cluster's position spread is below ``max_spread`` metres and
+      its heading spread below ``max_heading_std`` radians;
+    * the scans *fit* the map at the estimate: the share of valid beams whose
+      reading agrees with the range ray-cast in the map from the estimate
+      within ``fit_distance`` (default ``2 * sigma_hit``), averaged over the
+      last ``fit_window`` updates, is at least ``min_fit`` times the share
+      the sensor model expects on a correct pose (``z_hit * P(|N(0,
+      sigma_hit^2)| < fit_distance)``, see :func:`expected_fit`). A filter
+      can agree with itself on a wrong place (a converged cloud in a room
+      that looks alike); the fit catches most of that, because the
+      likelihood field never checks whether a beam passed through a wall,
+      and the ray cast does.
+
+    ``restart_fit`` (below ``min_fit``) is the fit under which an agreed cloud
+    counts as confidently wrong, for :func:`run_filter`'s ``restart_after``:
+    the scans at the truth fit a degraded real map at 0.45-0.8 of the beams
+    (10% quantile to median), at random wrong poses at 0-0.3.
+
+    The state starts ``searching``; ``hold`` confident updates in a row make it
+    ``localized``. A localized filter turns ``lost`` after ``hold_lost``
+    updates in a row that are not confident, and at once when every particle
+    got zero likelihood or has left the map's free space. ``lost`` turns
+    ``localized`` again like ``searching`` does.
+
+    Examples
+    --------
+    >>> StateRules().hold
+    3
+    """
+
+    min_beams: int = 5
+    min_share: float = 0.8
+    max_spread: float = 0.5
+    max_heading_std: float = 0.35
+    min_fit: float = 0.6
+    restart_fit: float = 0.5
+    fit_distance: float | None = None
+    fit_window: int = 5
+    hold: int = 3
+    hold_lost: int = 3
+
+    def __post_init__(self) -> None:
+        if min(int(self.min_beams), int(self.hold), int(self.hold_lost), int(self.fit_window)) < 1:
+            raise ValueError("min_beams, hold, hold_lost and fit_window must be whole numbers >= 1")
+        if not 0.0 < self.min_share <= 1.0:
+            raise ValueError(f"min_share must lie in (0, 1]; got {self.min_share!r}")
+        if not 0.0 <= self.min_fit <= 1.0:
+            raise ValueError(f"min_fit must lie in [0, 1]; got {self.min_fit!r}")
+        for name in ("max_spread", "max_heading_std"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number; got {v!r}")
+        if self.fit_distance is not None and not (np.isfinite(self.fit_distance) and self.fit_distance > 0):
+            raise ValueError(f"fit_distance must be a positive length in metres or None; got {self.fit_distance!r}")
+
+
+def expected_fit(sensor: Any, fit_distance: float) -> float:
+    """Share of valid beams a range model expects within ``fit_distance`` of an obstacle on the correct pose.
+
+    For a mixture with a Gaussian hit part (``z_hit``, ``sigma_hit``) it is
+    ``z_hit * P(|N(0, sigma_hit^2)| < fit_distance)``; other models get 0.9.
+
+    Examples
+    --------
+    >>> class LF:
+    ...     z_hit, sigma_hit = 0.9, 0.1
+    >>> round(expected_fit(LF(), 0.2), 3)          # 0.9 * P(|Z| < 2)
+    0.859
+    """
+    from math import erf, sqrt
+
+    z_hit = getattr(sensor, "z_hit", None)
+    sigma = getattr(sensor, "sigma_hit", None)
+    if z_hit is None or sigma is None:
+        return 0.9
+    return float(z_hit) * erf(float(fit_distance) / (float(sigma) * sqrt(2.0)))
+
+
+@dataclass(frozen=True, eq=False)
+class RunTrace:
+    """What :func:`run_filter` did at every step (one row per scan).
+
+    Attributes
+    ----------
+    poses, means, stds : ndarray (T, 3)
+        Estimate (mean of the best cluster), weighted mean and spread of all particles.
+    spread : ndarray (T,)
+        Position spread of the best cluster (m).
+    best_weight, n_eff : ndarray (T,)
+    n_particles, n_injected : ndarray (T,) of int
+    p_inject : ndarray (T,)
+    updated, resampled, degenerate : ndarray (T,) of bool
+        Whether the step used its scan, resampled, and whether every particle got zero likelihood.
+    n_valid : ndarray (T,) of int
+        Valid readings of the scan (inside the sensor's range limits; range scans only).
+    fit : ndarray (T,)
+        Share of valid beams that fit the map at the estimate (NaN when not assessed).
+    on_map : ndarray (T,)
+        Weight share of particles in the map's free space (NaN without a map).
+    state : ndarray (T,) of str
+        ``searching``, ``localized`` or ``lost`` (see :class:`StateRules`).
+    events : list of (int, str)
+        Special events: rejected odometry, re-drawn particles, state changes.
+    beam_evaluations : int
+        Particle x beam likelihood evaluations (the run's machine-independent cost).
+    seconds : float
+        Wall time of the filtering loop.
+    snapshots : dict[int, tuple[ndarray, ndarray]]
+        ``step -> (particles, weights)`` after the update of that step.
+    """
+
+    poses: NDArray[np.float64]
+    means: NDArray[np.float64]
+    stds: NDArray[np.float64]
+    spread: NDArray[np.float64]
+    best_weight: NDArray[np.float64]
+    n_eff: NDArray[np.float64]
+    n_particles: NDArray[np.int64]
+    n_injected: NDArray[np.int64]
+    p_inject: NDArray[np.float64]
+    updated: NDArray[np.bool_]
+    resampled: NDArray[np.bool_]
+    degenerate: NDArray[np.bool_]
+    n_valid: NDArray[np.int64]
+    fit: NDArray[np.float64]
+    on_map: NDArray[np.float64]
+    state: NDArray[np.str_]
+    events: list
+    beam_evaluations: int
+    seconds: float
+    snapshots: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.poses.shape[0])
+
+    def first_localized(self) -> int | None:
+        """First step whose state is ``localized`` (None if never)."""
+        k = np.flatnonzero(self.state == "localized")
+        return int(k[0]) if k.size else None
+
+    def lost_intervals(self) -> list[tuple[int, int]]:
+        """``[(first, last), ...]`` steps of each stretch in state ``lost``."""
+        return _intervals(self.state == "lost")
+
+    def state_summary(self) -> dict:
+        """The per-run account: first localized step, lost intervals, final state, share of time localized.
+
+        Examples
+        --------
+        See :func:`run_filter`.
+        """
+        n = len(self)
+        return {
+            "first_localized_scan": self.first_localized(),
+            "lost_intervals": [list(iv) for iv in self.lost_intervals()],
+            "final_state": str(self.state[-1]) if n else "searching",
+            "share_localized": round(float(np.mean(self.state == "localized")), 4) if n else 0.0,
+            "scans_without_valid_readings": int(np.sum(self.n_valid == 0)),
+            "degenerate_updates": int(self.degenerate.sum()),
+            "events": [[int(k), str(t)] for k, t in self.events],
+        }
+
+
+def _intervals(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
+    d = np.diff(m.astype(np.int8))
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+    return [(int(a), int(b)) for a, b in zip(starts, stops)]
+
+
+def _is_scan(z: Any) -> bool:
+    """True for a range scan ``(ranges (B,), angles (B,))``."""
+    if not isinstance(z, tuple) or len(z) != 2:
+        return False
+    a, b = np.shape(z[0]), np.shape(z[1])
+    return len(a) == 1 and a == b
+
+
+def _odometry_pair(u: Any) -> tuple[NDArray, NDArray] | None:
+    """``(prev, cur)`` if ``u`` is a pair of odometry poses, else None."""
+    if isinstance(u, tuple) and len(u) == 2:
+        a, b = np.asarray(u[0], dtype=float), np.asarray(u[1], dtype=float)
+        if a.shape == (3,) and b.shape == (3,):
+            return a, b
+    return None
+
+
+def run_filter(
+    mcl: "MCL",
+    n_steps: int,
+    control: Callable[[int], Any],
+    scan: Callable[[int], tuple | None],
+    *,
+    grid: OccupancyGrid | None = None,
+    min_motion: tuple[float, float] = (0.0, 0.0),
+    max_step: float | None = None,
+    rules: StateRules | None = None,
+    snapshot_steps: Any = (),
+    snapshot_particles: int | None = None,
+    recover: bool = True,
+    recovery_injection: float = 0.0,
+    restart_after: int = 0,
+    odometry: ArrayLike | None = None,
+    callback: Callable[[int], None] | None = None,
+) -> RunTrace:
+    """The one run driver: filter a sequence of controls and scans, with update gating and an honest state.
+
+    The command line (:func:`localize.cli.localize_log`), the book's chapters
+    and :func:`run_mcl` all run their filters through this loop. At step
+    ``k``:
+
+    1. ``u = control(k)`` moves the particles (``None``: no motion). An
+       odometry pair whose step is longer than ``max_step`` metres (default:
+       the map's diagonal -- no robot moves further than that between two
+       scans of one building) is a corrupt record: it is rejected and
+       reported in ``events``, the particles stay where they were.
+    2. ``scan(k)`` returns the measurement ``(ranges, angles)`` or None. It is
+       used only after the odometry says the robot moved at least
+       ``min_motion = (metres, radians)`` since the last update (repeating
+       the same scan of a standing robot would make the filter
+       over-confident; ROS AMCL's ``update_min_d`` / ``update_min_a``).
+    3. The estimate is taken from the weighted set; the filter resamples as
+       its policy says.
+    4. The state (:class:`StateRules`) is updated from the evidence: share of
+       weight in the best cluster, its spread, how well the scan fits the map
+       at the estimate, valid readings, all-zero likelihoods, particles off
+       the map. With ``recover`` (default), a filter whose particles all got
+       zero likelihood or all left the free space re-draws them uniformly
+       (global localization again) and says so.
+
+    Parameters
+    ----------
+    mcl : MCL
+        The initialised filter (advanced in place).
+    n_steps : int
+        Number of steps.
+    control, scan : callables of the step index
+        See above.
+    grid : OccupancyGrid, optional
+        The map: needed for the scan fit, the off-map check and ``max_step``
+        (default: the filter's own ``grid``). Particles count as off the map
+        outside the grid or in known obstacle cells (unknown cells are allowed).
+    min_motion : (float, float)
+        Update gating; ``(0, 0)`` uses every scan.
+    max_step : float, optional
+        Longest believable odometry step (metres).
+    rules : StateRules, optional
+        Thresholds of the state.
+    snapshot_steps : iterable of int
+        Steps whose weighted particle set (after the update) is kept.
+    snapshot_particles : int, optional
+        Keep at most this many (evenly spaced) particles per snapshot.
+    recover : bool
+        Re-draw the particles when all of them got zero likelihood or left the map.
+    recovery_injection : float
+        While the state is ``lost``, replace this fraction of the particles by
+        random ones at each resampling (in [0, 1)): the filter searches the
+        map again instead of insisting on the place it lost.
+    restart_after : int
+        Global localization again (0: never): when the cloud has agreed on one
+        place (best cluster share and spread within the rules) but the scans
+        have not fitted the map there for this many updates in a row, the
+        filter is probably confidently wrong. As many uniform particles as at
+        the start (``kld.n_max`` with KLD-sampling) are added beside the
+        current cloud, each half of the weight: if the old place was right it
+        keeps winning, if not the new particles find the robot. ``events``
+        says so.
+    odometry : array_like (T, 3), optional
+        Odometry pose at each step, for the gating (default: the second pose of
+        each odometry control).
+    callback : callable, optional
+        Called with ``k + 1`` after each step (progress bars).
+
+    Returns
+    -------
+    RunTrace
+
+    Examples
+    --------
+    A robot standing in the office world, its laser simulated; the filter
+    starts uniform and localizes:
+
+    >>> from localize.maps import office
+    >>> from localize.sensors import LikelihoodField
+    >>> g = office()
+    >>> lf = LikelihoodField(g, 8.0, sigma_hit=0.2, temper=0.2)
+    >>> rng = np.random.default_rng(1)
+    >>> angles = np.linspace(-np.pi / 2, np.pi / 2, 37)
+    >>> truth = np.array([[3.0, 3.0, 1.0]])
+    >>> f = MCL.uniform(g, 4000, (0.0,) * 4, lf, rng=rng, free_space_only=True)
+    >>> tr = run_filter(f, 15, lambda k: None, lambda k: (lf.sample(truth, angles, rng)[0], angles))
+    >>> str(tr.state[0]), tr.first_localized() is not None, bool(np.hypot(*(tr.poses[-1, :2] - truth[0, :2])) < 0.5)
+    ('searching', True, True)
+    >>> sorted(tr.state_summary())[:3]
+    ['degenerate_updates', 'events', 'final_state']
+    """
+    rules = StateRules() if rules is None else rules
+    if not 0.0 <= float(recovery_injection) < 1.0:
+        raise ValueError(f"recovery_injection must be a fraction in [0, 1); got {recovery_injection!r}")
+    base_injection = mcl.injection
+    n_restart = mcl.kld.n_max if mcl.kld is not None else mcl.n
+    poor = 0
+    recent: list[float] = []
+    fit_s = float("nan")
+    t = int(n_steps)
+    if t < 1:
+        raise ValueError(f"n_steps must be >= 1; got {n_steps!r}")
+    grid = mcl.grid if grid is None else grid
+    if grid is not None and not isinstance(grid, OccupancyGrid):
+        raise TypeError(f"grid must be an OccupancyGrid or None; got {type(grid).__name__}")
+    if max_step is None and grid is not None:
+        max_step = float(np.hypot(grid.width_m, grid.height_m))
+    d_min, a_min = (float(v) for v in min_motion)
+    odom = None if odometry is None else np.asarray(odometry, dtype=float)
+    keep = {int(k) for k in snapshot_steps}
+    sensor = mcl.sensor
+    offset = np.asarray(getattr(sensor, "sensor_offset", np.zeros(3)), dtype=float)
+    lo_r = float(getattr(sensor, "min_range", 0.0) or 0.0)
+    hi_r = float(getattr(sensor, "max_range", np.inf))
+    fit_d = rules.fit_distance
+    if fit_d is None:
+        fit_d = 2.0 * float(getattr(sensor, "sigma_hit", 0.2))
+    fit_expected = expected_fit(sensor, fit_d)
+    if grid is not None:
+        from .raycast import RayCaster
+
+        caster = RayCaster(grid, hi_r if np.isfinite(hi_r) else 1e3, method="march")
+        free = ~grid.occupied         # "on the map": inside the grid and not in a known obstacle
+    out = {name: np.zeros((t, 3)) for name in ("poses", "means", "stds")}
+    spread, best, n_eff, p_inj, fit, on_map = (np.full(t, np.nan) for _ in range(6))
+    n_p, n_inj, n_valid = (np.zeros(t, dtype=np.int64) for _ in range(3))
+    updated, resampled, degen = (np.zeros(t, dtype=bool) for _ in range(3))
+    state = np.empty(t, dtype="<U9")
+    events: list[tuple[int, str]] = []
+    snaps: dict = {}
+    evals = 0
+    st = mcl.status
+    cur = "searching"
+    good = bad = 0
+    last_odom: NDArray | None = None
+    t0 = _now()
+    for k in range(t):
+        st.resampled = False
+        st.n_injected = 0
+        u = control(k) if k > 0 else None
+        pair = _odometry_pair(u) if u is not None else None
+        if pair is not None:
+            step_len = float(np.hypot(*(pair[1][:2] - pair[0][:2])))
+            if not np.all(np.isfinite(pair[0])) or not np.all(np.isfinite(pair[1])) or (
+                    max_step is not None and step_len > max_step):
+                events.append((k, f"odometry step of {step_len:.3g} m is impossible (longer than {max_step:.3g} m, "
+                                  "the map's diagonal): corrupt record rejected, particles not moved"))
+                u = None
+        if u is not None:
+            mcl.predict(u)
+        z = scan(k)
+        do_update = z is not None
+        where = None if odom is None else odom[k]
+        if where is None and pair is not None:
+            where = pair[1]
+        if do_update and last_odom is not None and where is not None and (d_min > 0 or a_min > 0):
+            m = _relative(last_odom, where)
+            do_update = bool(not np.all(np.isfinite(m)) or np.hypot(m[0], m[1]) >= d_min or abs(m[2]) >= a_min)
+        n_p[k] = mcl.n
+        if _is_scan(z):
+            ranges, angles = np.asarray(z[0], dtype=float), np.asarray(z[1], dtype=float)
+            valid = np.isfinite(ranges) & (ranges > lo_r) & (ranges < hi_r)
+            n_valid[k] = int(valid.sum())
+        if do_update:
+            mcl.update(*z)
+            evals += int(n_p[k]) * (int(np.size(z[1])) if _is_scan(z) else 1)
+            last_odom = where
+        if k in keep:
+            w = mcl.weights
+            sub = slice(None)
+            if snapshot_particles is not None and mcl.n > snapshot_particles:
+                sub = np.linspace(0, mcl.n - 1, int(snapshot_particles)).astype(int)
+            snaps[k] = (mcl.particles[sub].copy(), w[sub].copy())
+        e = mcl.estimate()
+        pose = e.pose if np.all(np.isfinite(e.pose)) else e.mean
+        out["poses"][k], out["means"][k], out["stds"][k] = pose, e.mean, e.std
+        spread[k], best[k], n_eff[k] = e.spread, e.best_weight, st.n_eff
+        degenerate = bool(do_update and st.degenerate)
+        degen[k] = degenerate
+        # ---- evidence
+        if grid is not None:
+            inside = _free_share(grid, free, mcl.particles, mcl.weights)
+            on_map[k] = inside
+        if do_update and grid is not None and n_valid[k] > 0 and _is_scan(z):
+            fit[k] = _scan_fit(caster, pose, offset, ranges[valid], angles[valid], fit_d, rules.min_beams)
+        off_map = grid is not None and on_map[k] == 0.0
+        agreed = e.best_weight >= rules.min_share and e.spread <= rules.max_spread
+        if do_update and np.isfinite(fit[k]):
+            recent = (recent + [float(fit[k])])[-int(rules.fit_window):]
+            fit_s = float(np.mean(recent))
+            poor = poor + 1 if (agreed and fit_s < rules.restart_fit * fit_expected) else 0
+        if restart_after and poor >= restart_after and mcl.sampler is not None:
+            # global localization again, without throwing the current hypothesis away: the old cloud keeps
+            # half of the weight, n_restart uniform particles share the other half; the next scans decide
+            fresh = np.asarray(mcl.sampler(n_restart, mcl.rng), dtype=float)
+            mcl.particles = np.vstack([mcl.particles, fresh])
+            mcl.log_weights = np.concatenate([mcl.log_weights + np.log(0.5),
+                                              np.full(n_restart, np.log(0.5 / n_restart))])
+            events.append((k, f"the cloud agreed on a place where the scans have not fitted the map for {poor} "
+                              f"updates: {n_restart} particles drawn over the map beside it (global "
+                              "localization again)"))
+            poor = 0
+            good = 0
+            recent, fit_s = [], float("nan")
+            if cur == "localized":
+                cur = "lost"
+        elif recover and (degenerate or off_map) and mcl.sampler is not None:
+            mcl.particles = np.asarray(mcl.sampler(mcl.n, mcl.rng), dtype=float)
+            mcl.log_weights = np.full(mcl.n, -np.log(mcl.n))
+            why = "every particle got zero likelihood" if degenerate else "every particle left the map's free space"
+            events.append((k, f"{why}: particles re-drawn over the map (global localization again)"))
+        elif mcl.needs_resampling() or (cur == "lost" and recovery_injection > 0 and do_update):
+            if cur == "lost" and recovery_injection > 0 and mcl.sampler is not None:
+                mcl.injection = max(base_injection, float(recovery_injection))
+            mcl.resample()
+            mcl.injection = base_injection
+        resampled[k], n_inj[k], p_inj[k] = st.resampled, st.n_injected, st.p_inject
+        updated[k] = do_update
+        # ---- state
+        prev = cur
+        if degenerate or off_map:
+            good = 0
+            if cur == "localized":
+                cur = "lost"
+        elif do_update:
+            confident = ((not _is_scan(z) or n_valid[k] >= rules.min_beams) and e.best_weight >= rules.min_share
+                         and e.spread <= rules.max_spread
+                         and (e.cluster_std is None or e.cluster_std[2] <= rules.max_heading_std)
+                         and (np.isnan(fit_s) or fit_s >= rules.min_fit * fit_expected))
+            if confident:
+                good += 1
+                bad = 0
+                if cur != "localized" and good >= rules.hold:
+                    cur = "localized"
+            else:
+                good = 0
+                bad += 1
+                if cur == "localized" and bad >= rules.hold_lost:
+                    cur = "lost"
+        state[k] = cur
+        if cur != prev:
+            events.append((k, f"state {prev} -> {cur}"))
+        if callback is not None:
+            callback(k + 1)
+    seconds = _now() - t0
+    return RunTrace(out["poses"], out["means"], out["stds"], spread, best, n_eff, n_p, n_inj, p_inj, updated,
+                    resampled, degen, n_valid, fit, on_map, state, events, evals, seconds, snaps)
+
+
+def _now() -> float:
+    import time
+
+    return time.perf_counter()
+
+
+def _free_share(grid: OccupancyGrid, free: NDArray, particles: NDArray, weights: NDArray) -> float:
+    rel = (particles[:, :2] - grid.origin) / grid.resolution
+    with np.errstate(invalid="ignore"):
+        ok = np.all(np.isfinite(rel), axis=1) & (np.abs(rel).max(axis=1) < 1e9)
+    j = np.zeros(len(rel), dtype=np.int64)
+    i = np.zeros(len(rel), dtype=np.int64)
+    j[ok] = np.floor(rel[ok, 0]).astype(np.int64)
+    i[ok] = np.floor(rel[ok, 1]).astype(np.int64)
+    h, w = free.shape
+    ok &= (i >= 0) & (i < h) & (j >= 0) & (j < w)
+    inside = np.zeros(len(rel), dtype=bool)
+    inside[ok] = free[i[ok], j[ok]]
+    return float(weights[inside].sum() / max(weights.sum(), 1e-300))
+
+
+def _scan_fit(caster: Any, pose: NDArray, offset: NDArray, ranges: NDArray, angles: NDArray, fit_d: float,
+              min_beams: int) -> float:
+    """Share of beams whose reading agrees with the map's ray-cast range from ``pose`` within ``fit_d``.
+
+    A beam that reads much longer than the map allows passed "through" a
+    mapped wall; one that reads much shorter hit something the map does not
+    show. Either way the map does not confirm it. (The likelihood field
+    cannot see the first kind: it only asks how close the end point is to
+    *some* obstacle, so a wrong pose whose beams pass through walls can score
+    well; this check is what makes the state honest about it.) A beam whose
+    cast ray stops at an *unknown* cell cannot be judged and is left out; with
+    fewer than ``min_beams`` beams left the fit is NaN.
+    """
+    if ranges.size < min_beams:
+        return float("nan")
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    sp = np.array([[pose[0] + c * offset[0] - s * offset[1], pose[1] + s * offset[0] + c * offset[1],
+                    pose[2] + offset[2]]])
+    expected = caster.cast(sp, angles)[0]
+    g = caster.grid
+    if g.unknown.any():
+        a = sp[0, 2] + angles
+        reach = expected + 0.5 * g.resolution
+        hit = np.column_stack([sp[0, 0] + reach * np.cos(a), sp[0, 1] + reach * np.sin(a)])
+        cells = g.world_to_cell(hit, outside="clip")
+        judged = ~g.unknown[cells[:, 0], cells[:, 1]] & g.contains(hit)
+        if int(judged.sum()) < min_beams:
+            return float("nan")
+        ranges, expected = ranges[judged], expected[judged]
+    return float(np.mean(np.abs(ranges - expected) <= fit_d))

@@ -528,6 +528,28 @@ class LikelihoodField:
         point far from any wall like one clearly missing.
     sensor_offset, max_beams, temper
         As for :class:`BeamModel`.
+    min_range : float
+        Readings ``<= min_range`` are skipped like max-range readings (ROS
+        AMCL's ``laser_min_range``): a laser cannot measure closer than its
+        minimum range, and real scanners report 0 (or a tiny number) for a
+        failed reading. Such readings are not evidence. A reading of exactly
+        0 is always skipped.
+    unknown_is_obstacle : bool, optional
+        Whether unknown map cells count as obstacles in the distance field
+        (default: the grid's own setting). ``False`` measures every end point's
+        distance to the nearest *known* obstacle, as ROS AMCL does. With
+        ``True``, every beam that ends in unknown space -- beyond the outer
+        walls of a map built from scans -- scores as a perfect hit, which
+        rewards wrong poses whose scans seem to pass through walls. With
+        ``False``, end points in unknown cells are scored by their distance
+        to the nearest known obstacle; end points off the map always score as
+        at ``max_dist`` (a miss, as in ROS AMCL).
+    unknown_neutral : bool
+        With ``unknown_is_obstacle=False``: give end points in unknown cells
+        one neutral score instead, the same for every pose -- that of an end
+        point dropped at a random place of the known map
+        (``unknown_log_prob``): the map says nothing there. The command line
+        uses it (measured in ``benchmarks/bench_global.py``).
 
     Examples
     --------
@@ -544,9 +566,20 @@ class LikelihoodField:
     def __init__(self, grid: OccupancyGrid, max_range: float, z_hit: float = 0.9, z_rand: float = 0.1,
                  sigma_hit: float = 0.2, *, max_dist: float | None = None,
                  sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
-                 temper: float = 1.0) -> None:
-        self.grid = _check_grid(grid)
+                 temper: float = 1.0, min_range: float = 0.0, unknown_is_obstacle: bool | None = None,
+                 unknown_neutral: bool = True) -> None:
+        self.unknown_neutral = bool(unknown_neutral)
+        grid = _check_grid(grid)
+        if unknown_is_obstacle is not None and bool(unknown_is_obstacle) != grid.unknown_is_obstacle:
+            grid = OccupancyGrid(grid.data, grid.resolution, origin=grid.origin,
+                                 occupied_threshold=grid.occupied_threshold,
+                                 unknown_is_obstacle=bool(unknown_is_obstacle))
+        self.grid = grid
         self.max_range = _check_max_range(max_range)
+        mn = float(min_range)
+        if not (np.isfinite(mn) and 0.0 <= mn < self.max_range):
+            raise ValueError(f"min_range must lie in [0, max_range = {self.max_range:g}) metres; got {min_range!r}")
+        self.min_range = mn
         w = _weights(("z_hit", "z_rand"), (z_hit, z_rand))
         self.z_hit, self.z_rand = float(w[0]), float(w[1])
         self.sigma_hit = _positive("sigma_hit", sigma_hit)
@@ -581,8 +614,18 @@ class LikelihoodField:
         res = g.resolution
         pad = int(math.ceil(self.max_range / res)) + 2
         rows, cols = g.shape
-        table = np.full((rows + 2 * pad, cols + 2 * pad), float(self.point_log_prob(self.max_dist)))
-        table[pad:pad + rows, pad:pad + cols] = self.point_log_prob(g.distance_field)
+        cells = self.point_log_prob(g.distance_field)
+        outside = float(self.point_log_prob(self.max_dist))
+        self.unknown_log_prob = outside
+        if not g.unknown_is_obstacle and self.unknown_neutral:
+            # the map says nothing about its unknown cells: an end point there scores like one dropped at a
+            # random place of the known map (the same for every pose). Off the map it is a miss, as in AMCL.
+            known = ~g.unknown
+            if known.any() and not known.all():
+                self.unknown_log_prob = float(np.log(np.mean(np.exp(cells[known]))))
+                cells = np.where(known, cells, self.unknown_log_prob)
+        table = np.full((rows + 2 * pad, cols + 2 * pad), outside)
+        table[pad:pad + rows, pad:pad + cols] = cells
         self._pad = pad
         self._table = table.astype(np.float32)
         self._flat = self._table.ravel()
@@ -625,10 +668,15 @@ class LikelihoodField:
         for n, (x, y, th) in enumerate(sp):
             q = 0.0
             for zk, ak in zip(z, a):
-                if zk >= self.max_range:
+                if zk >= self.max_range or zk <= self.min_range:
                     continue
                 ex, ey = x + zk * math.cos(th + ak), y + zk * math.sin(th + ak)
-                d = self.grid.distance_at([ex, ey], outside=self.max_dist)
+                g = self.grid
+                if not g.unknown_is_obstacle and self.unknown_neutral and bool(g.contains([ex, ey])) and g.unknown[
+                        tuple(g.world_to_cell([ex, ey]))]:
+                    q += self.unknown_log_prob          # the map says nothing here
+                    continue
+                d = g.distance_at([ex, ey], outside=self.max_dist)
                 q += float(self.point_log_prob(d))
             out[n] = q * self.temper
         return out
@@ -640,13 +688,13 @@ class LikelihoodField:
             raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
         sel = select_beams(a.size, self.max_beams)
         z, a = z[sel], a[sel]
-        keep = z < self.max_range
+        keep = (z < self.max_range) & (z > self.min_range)
         return z[keep], a[keep]
 
     def log_likelihood(self, poses: ArrayLike, ranges: ArrayLike, angles: ArrayLike) -> NDArray[np.float64]:
         """Log-likelihood ``(N,)`` of one scan for each robot pose (vectorised end-point lookups).
 
-        Max-range readings are skipped. End points off the map score as at
+        Max-range readings and readings ``<= min_range`` are skipped. End points off the map score as at
         ``max_dist``; poses far outside the map are clipped onto the padded
         table's border cells, which hold that score.
 

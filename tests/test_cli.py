@@ -275,3 +275,105 @@ def localize_grid(data, resolution):
     from localize import OccupancyGrid
 
     return OccupancyGrid(data, resolution)
+
+
+# ---------------------------------------------------------------------------- the honest state
+def _as_log(run, **changes):
+    d = dict(times=run.times, odometry=run.odometry, ranges=run.ranges, angles=run.angles,
+             max_range=run.max_range, poses=run.poses, sensor_offset=run.sensor_offset)
+    d.update(changes)
+    return io.LaserLog(**d)
+
+
+@pytest.fixture(scope="module")
+def rooms_run():
+    """An asymmetric world of random rooms (the office world is symmetric under a half turn)."""
+    grid = maps.random_rooms((150, 100), 0.1, np.random.default_rng(3))
+    run = sim.range_run(grid, np.random.default_rng(2), n_steps=150, dt=0.5, speed=0.4, max_range=12.0, n_clutter=3)
+    return grid, run
+
+
+STATE_KW = dict(n_particles=3000, temper=0.3, sensor_params={"sigma_hit": 0.2}, min_range=0.05)
+
+
+def _err(res, run):
+    return np.hypot(*(res.estimates[:, :2] - run.poses[:, :2]).T)
+
+
+def test_state_localizes_on_a_good_run(rooms_run):
+    grid, run = rooms_run
+    res = cli.localize_log(grid, _as_log(run), rng=np.random.default_rng(0), **STATE_KW)
+    e = _err(res, run)
+    k = res.trace.first_localized()
+    assert k is not None and res.state[-1] == "localized"
+    assert np.median(e[res.state == "localized"]) < 0.3
+    assert set(np.unique(res.state)) <= {"searching", "localized", "lost"}
+    assert np.all(res.state[:k] == "searching")
+
+
+@pytest.mark.parametrize("dead", [0.0, 12.0, 0.03])          # all zero, all "no return", all below min_range
+def test_dead_laser_is_reported_not_localized(rooms_run, dead, tmp_path):
+    grid, run = rooms_run
+    log = _as_log(run, ranges=np.full_like(run.ranges, dead))
+    res = cli.localize_log(grid, log, rng=np.random.default_rng(0), **STATE_KW)
+    assert res.trace.first_localized() is None and np.all(res.state == "searching")
+    assert np.all(res.trace.n_valid == 0)
+    summary = cli.summarize(res, log, 3000, log.poses, {})
+    assert summary["state"]["scans_without_valid_readings"] == len(log)
+    assert summary["state"]["final_state"] == "searching"
+    line = cli.headline(summary)
+    assert line.startswith("NOT localized") and f"{len(log)} of {len(log)} scans had no valid reading" in line
+
+
+def test_corrupt_odometry_record_is_rejected_and_reported(rooms_run):
+    grid, run = rooms_run
+    odo = np.array(run.odometry)
+    odo[70] = [1e15, 1e15, 0.3]                        # one corrupt record (the issue's 1e15)
+    res = cli.localize_log(grid, _as_log(run, odometry=odo), rng=np.random.default_rng(0), **STATE_KW)
+    ev = [k for k, text in res.trace.events if "odometry" in text and "impossible" in text]
+    assert ev == [70, 71]                              # into and out of the bad record
+    assert np.all(np.abs(res.estimates) < 100)         # never thrown to 1e13 m
+    e = _err(res, run)
+    assert res.state[-1] == "localized" and e[-1] < 0.5
+
+
+def test_kidnapping_turns_the_state_lost(rooms_run):
+    grid, _ = rooms_run
+    run = sim.range_run(grid, np.random.default_rng(2), n_steps=150, dt=0.5, speed=0.4, max_range=12.0,
+                        n_clutter=3, kidnap_at=[90])
+    res = cli.localize_log(grid, _as_log(run), rng=np.random.default_rng(0), **STATE_KW)
+    assert res.state[89] == "localized"
+    lost = [a for a, b in res.trace.lost_intervals() if a >= 90]
+    assert lost and lost[0] <= 100                     # noticed within ten scans
+    e = _err(res, run)
+    # while it says "localized" after the kidnapping it is right (or it has not noticed yet)
+    late = (res.state == "localized") & (np.arange(len(e)) > lost[0])
+    assert np.all(e[late] < 1.0)
+
+
+def test_never_converging_robot_stays_searching():
+    """A robot in a long, featureless corridor: its scans cannot tell where along it it is."""
+    from localize.grid import OccupancyGrid
+
+    d = np.zeros((30, 600))                    # 60 m x 3 m, walls all round, ends beyond the laser's 12 m
+    d[:3] = d[-3:] = 1
+    d[:, :3] = d[:, -3:] = 1
+    g = OccupancyGrid(d, 0.1)
+    run = sim.range_run(g, np.random.default_rng(0), n_steps=120, dt=0.5, speed=0.4, max_range=12.0, n_clutter=0,
+                        waypoints=[[22.0, 1.5], [38.0, 1.5]], start=[22.0, 1.5, 0.0])
+    for seed in range(3):
+        res = cli.localize_log(g, _as_log(run), rng=np.random.default_rng(seed), **STATE_KW)
+        assert res.trace.first_localized() is None, seed
+        assert cli.headline(cli.summarize(res, _as_log(run), 3000, None, {})).startswith("NOT localized")
+
+
+def test_state_column_and_summary_section(sim_files, tmp_path):
+    m, lg, _ = sim_files
+    out = tmp_path / "o"
+    status, text, _ = run_cli("run", "--map", m, "--log", lg, "--particles", "2000", "--out", out)
+    assert status == 0
+    rows = list(csv.DictReader(open(out / "trajectory.csv")))
+    assert {r["state"] for r in rows} <= {"searching", "localized", "lost"}
+    s = json.loads((out / "summary.json").read_text())
+    assert {"first_localized_scan", "lost_intervals", "final_state"} <= set(s["state"])
+    assert ("localized from scan" in text) or ("NOT localized" in text)

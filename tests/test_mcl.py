@@ -633,3 +633,109 @@ def test_all_options_together():
         assert 200 <= f.n <= 5000 and f.status.n_injected >= round(0.05 * f.n) - 1
     assert f.status.p_inject > 0 or np.allclose(e.pose[:2], [8.0, 2.0], atol=0.3)
     assert "kld=" in repr(f) and "augmented=" in repr(f) and "injection=" in repr(f)
+
+
+# ----------------------------------------------------------------- the run driver and its state
+def _line(n=400, seed=0):
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.uniform(0, 10, n), rng.uniform(0, 10, n), np.zeros(n)]), rng
+
+
+def test_augmented_injects_when_every_likelihood_is_zero():
+    """The worst possible fit (w_avg = 0) must raise the injection probability, not skip the averages."""
+    g = office()
+    p, rng = _line()
+    f = MCL(g.sample_free(400, rng), shift, XYSensor(0.3), rng=rng, grid=g, augmented=Augmented(0.05, 0.5))
+    for _ in range(3):
+        f.step(None, [5.0, 5.0])
+    assert f.status.p_inject == 0.0
+
+    class Nothing:
+        def log_likelihood(self, poses, *z):
+            return np.full(len(poses), -np.inf)
+
+    f.sensor = Nothing()
+    injected = 0
+    for _ in range(6):                                          # w_fast falls by half each time, w_slow by 5%
+        f.step(None, [5.0, 5.0])
+        assert f.status.degenerate
+        injected += f.status.n_injected
+    assert f.status.p_inject > 0.3 and injected > 0
+
+
+def test_adaptive_tempering_keeps_the_stated_effective_sample_size():
+    p, rng = _line(2000)
+    f = MCL(p, shift, XYSensor(0.05), rng=rng, min_ess=0.3)
+    f.update([3.0, 4.0])                                        # a sharp sensor would leave a handful
+    assert 0.0 < f.status.beta < 1.0
+    assert f.n_eff == pytest.approx(0.3 * 2000, rel=0.02)
+    g = MCL(p, shift, XYSensor(5.0), rng=np.random.default_rng(0), min_ess=0.3)
+    g.update([3.0, 4.0])                                        # a weak one is left alone
+    assert g.status.beta == 1.0
+    with pytest.raises(ValueError, match="min_ess"):
+        MCL(p, shift, XYSensor(), rng=rng, min_ess=1.0)
+
+
+def test_chunked_kld_draws_the_same_number_as_the_full_draw():
+    """Chunked KLD-sampling is the same rule: the particle counts agree in distribution."""
+    counts = {False: [], True: []}
+    for chunked in (False, True):
+        for seed in range(30):
+            rng = np.random.default_rng(seed)
+            p = rng.normal([5, 5, 0], [0.3, 0.3, 0.1], size=(3000, 3))
+            f = MCL(p, shift, XYSensor(), rng=rng, kld=KLDSampling(n_min=100, n_max=50_000, chunked=chunked))
+            f.resample()
+            counts[chunked].append(f.n)
+    a, b = np.mean(counts[False]), np.mean(counts[True])
+    sd = np.std(counts[False]) / np.sqrt(30) + 1.0
+    assert abs(a - b) < 4 * sd * np.sqrt(2), (a, b)
+    assert max(counts[True]) < 50_000
+
+
+def test_unknown_cells_allowed_with_a_soft_penalty():
+    data = np.zeros((20, 20))
+    data[:, 10:] = np.nan                                       # the right half of the map is unknown
+    from localize.grid import OccupancyGrid
+
+    g = OccupancyGrid(data, 0.5)
+    p = np.array([[2.0, 5.0, 0.0], [7.0, 5.0, 0.0]])           # one in free space, one in unknown space
+
+    class Flat:
+        def log_likelihood(self, poses, *z):
+            return np.zeros(len(poses))
+
+    strict = MCL(p, shift, Flat(), rng=np.random.default_rng(0), grid=g, free_space_only=True)
+    strict.update()
+    assert strict.weights[1] == 0.0
+    soft = MCL(p, shift, Flat(), rng=np.random.default_rng(0), grid=g, free_space_only=True, unknown_allowed=True,
+               unknown_penalty=1.0)
+    soft.update()
+    assert soft.weights[1] / soft.weights[0] == pytest.approx(np.exp(-1.0))
+
+
+def test_run_filter_rejects_an_impossible_odometry_step_and_reports_it():
+    from localize.mcl import OdometryMotion, run_filter
+
+    g = office()
+    rng = np.random.default_rng(0)
+    f = MCL.gaussian([5.0, 5.5, 0.0], (0.05, 0.05, 0.02), 200, OdometryMotion((0.0,) * 4), XYSensor(), rng=rng,
+                     grid=g)
+    odo = np.zeros((4, 3))
+    odo[:, 0] = [0.0, 0.1, 1e15, 0.3]
+    tr = run_filter(f, 4, lambda k: (odo[k - 1], odo[k]), lambda k: None)
+    assert [k for k, t in tr.events if "impossible" in t] == [2, 3]
+    assert np.all(np.abs(tr.poses[:, 0] - 5.0) < 0.5)           # the particles stayed in the building
+
+
+def test_run_filter_state_without_a_scan_fit():
+    """A non-range sensor (no scan to fit): the state follows cluster share and spread alone."""
+    from localize.mcl import StateRules, run_filter
+
+    p, rng = _line(3000)
+    f = MCL(p, shift, XYSensor(0.2), rng=rng)
+    tr = run_filter(f, 8, lambda k: None, lambda k: ([5.0, 5.0],), rules=StateRules(hold=2))
+    assert list(tr.state[:1]) == ["searching"] and tr.state[-1] == "localized"
+    assert tr.first_localized() is not None and tr.lost_intervals() == []
+    assert tr.state_summary()["final_state"] == "localized"
+    with pytest.raises(ValueError, match="min_share"):
+        StateRules(min_share=0.0)

@@ -138,10 +138,11 @@ def test_global_localization_converges_in_most_seeds(logs, built, name, n_scans,
     sub = logs[name].select(slice(0, n_scans * every, every))
     steps = []
     for seed in range(3):
-        res = cli.localize_log(built[name], sub, n_particles=10000, rng=np.random.default_rng(seed))  # CLI defaults
+        kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-"]))  # CLI defaults
+        res = cli.localize_log(built[name], sub, rng=np.random.default_rng(seed), **kw)
         err = np.hypot(*(res.estimates[:, :2] - sub.poses[:, :2]).T)
         steps.append(cli.converged_at(err, 0.5, hold=20))
-    print(f"\n{name} global localization, 10000 particles, CLI defaults, every {every} scan(s): "
+    print(f"\n{name} global localization, CLI defaults, every {every} scan(s): "
           f"converged at scans {steps}")
     ok = [s is not None and s <= within for s in steps]
     assert sum(ok) >= 2, steps
@@ -160,3 +161,59 @@ def test_one_command_on_the_intel_log(shared_data, tmp_path):
           f"median error after {s['median_error_after_convergence_m']} m, {s['real_time_factor']}x real time")
     assert s["scans"] == 150 and s["real_time_factor"] is not None
     assert s["convergence_step_reference"] is not None and s["median_error_after_convergence_m"] < 0.5
+
+
+def _bench():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_global.py"
+    spec = importlib.util.spec_from_file_location("bench_global", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_benchmark_success_rule():
+    """The rule of benchmarks/bench_global.py on made-up trajectories (no data needed)."""
+    b = _bench()
+    ref = np.zeros((100, 3))
+    est = np.zeros((100, 3))
+    est[:20, 0] = 5.0                                    # wrong for 20 scans, then right
+    j = b.judge(est, ref)
+    assert j["success"] and j["converged_at"] == 20
+    late = est.copy()
+    late[:40, 0] = 5.0                                   # right only after 30% of the run
+    assert not b.judge(late, ref)["success"]
+    lost = est.copy()
+    lost[70:, 0] = 1.5                                   # right, then more than 1 m off
+    assert not b.judge(lost, ref)["success"]
+    head = est.copy()
+    head[:, 2] = np.radians(20)                          # position right, heading 20 degrees off
+    assert not b.judge(head, ref)["success"]
+
+
+def test_degraded_map_disagrees_like_a_real_one():
+    from localize.maps import office
+
+    b = _bench()
+    g = office(0.05)
+    d = b.degrade_map(g, np.random.default_rng(0))
+    grown = d.occupied & g.free
+    assert grown.sum() > 0.05 * g.occupied.sum()          # thicker walls and added obstacles
+    assert (g.occupied & ~d.occupied & ~d.unknown).sum() > 0   # some obstacles erased
+    assert 0.02 < d.unknown.sum() / g.free.sum() < 0.08     # one region unknown (5% of the free area)
+
+
+def test_benchmark_small_version(shared_data, capsys):
+    """A small version of benchmarks/bench_global.py: one start, one seed, 120 scans of two logs."""
+    carmen(shared_data, "intel")
+    b = _bench()
+    assert b.main(["--logs", "intel", "willow", "--starts", "1", "--seeds", "1", "--scans", "120",
+                   "--workers", "1"]) == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("| intel") or line.startswith("| willow")]
+    assert len(rows) == 2
+    for r in rows:
+        cells = [c.strip() for c in r.strip("|").split("|")]
+        assert cells[1] == "1" and cells[2].split("/")[1].startswith("1")
