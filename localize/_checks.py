@@ -1,4 +1,12 @@
-"""Validation of particle arrays, shared by every function that takes a particle set.
+"""Validation shared by the whole package: one check, one wording, for each kind of argument.
+
+Every public function validates its inputs with these helpers, so that a wrong
+argument gets the same clear message wherever it is passed: the argument's
+name, what was wrong, and the expected type or range. All of them take the
+value first and its name second, ``check_positive(sigma, "sigma_hit")``.
+
+Particle arrays
+---------------
 
 The convention (DESIGN.md, the preface): N particles are an ``(N, 3)`` array,
 one pose ``(x, y, theta)`` per **row**. Most wrong shapes are caught by the
@@ -23,14 +31,151 @@ ValueError: particles must be an (N, 3) array, one particle (x, y, theta) per ro
 
 from __future__ import annotations
 
+import math
 import warnings
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .geometry import as_poses
 
-__all__ = ["PoseShapeWarning", "check_poses"]
+__all__ = ["PoseShapeWarning", "check_poses", "check_rng", "check_number", "check_positive", "check_nonnegative",
+           "check_probability", "check_count", "check_max_range", "check_angles", "check_grid", "check_sensor_poses"]
+
+#: What every rng error suggests.
+RNG_HINT = "np.random.default_rng(seed)"
+
+
+def check_rng(rng: Any, name: str = "rng") -> np.random.Generator:
+    """``rng`` itself if it is a ``numpy.random.Generator``, else ``TypeError``.
+
+    Randomness enters every function through an explicit generator (DESIGN.md),
+    never through numpy's global state, so that a seed reproduces a run.
+
+    >>> check_rng(None)
+    Traceback (most recent call last):
+    ...
+    TypeError: rng must be a numpy.random.Generator, e.g. np.random.default_rng(seed); got NoneType
+    """
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"{name} must be a numpy.random.Generator, e.g. {RNG_HINT}; got {type(rng).__name__}")
+    return rng
+
+
+def check_number(value: Any, name: str, unit: str = "") -> float:
+    """``value`` as a finite float; ``TypeError`` if it is not a number, ``ValueError`` if NaN or infinite."""
+    what = f"a number of {unit}" if unit else "a number"
+    if isinstance(value, bool):
+        raise TypeError(f"{name} must be {what}; got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be {what}; got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite; got {value!r}")
+    return v
+
+
+def check_positive(value: Any, name: str, unit: str = "") -> float:
+    """``value`` as a finite float ``> 0``.
+
+    >>> check_positive(0.2, "sigma_hit")
+    0.2
+    >>> check_positive(0, "sigma_hit", "metres")
+    Traceback (most recent call last):
+    ...
+    ValueError: sigma_hit must be a finite number of metres > 0; got 0
+    """
+    v = check_number(value, name, unit)
+    if v <= 0:
+        what = f"a finite number of {unit}" if unit else "a finite number"
+        raise ValueError(f"{name} must be {what} > 0; got {value!r}")
+    return v
+
+
+def check_nonnegative(value: Any, name: str, unit: str = "") -> float:
+    """``value`` as a finite float ``>= 0``."""
+    v = check_number(value, name, unit)
+    if v < 0:
+        what = f"a finite number of {unit}" if unit else "a finite number"
+        raise ValueError(f"{name} must be {what} >= 0; got {value!r}")
+    return v
+
+
+def check_probability(value: Any, name: str) -> float:
+    """``value`` as a float in ``[0, 1]``."""
+    v = check_number(value, name)
+    if not 0.0 <= v <= 1.0:
+        raise ValueError(f"{name} must be a probability in [0, 1]; got {value!r}")
+    return v
+
+
+def check_count(value: Any, name: str, minimum: int = 1) -> int:
+    """``value`` as an ``int >= minimum``; a float is accepted only if it is whole (``1e4``).
+
+    >>> check_count(1e4, "n_particles")
+    10000
+    >>> check_count(2.5, "n_particles")
+    Traceback (most recent call last):
+    ...
+    TypeError: n_particles must be a whole number >= 1; got 2.5
+    """
+    if isinstance(value, bool):
+        raise TypeError(f"{name} must be a whole number >= {minimum}; got {value!r}")
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a whole number >= {minimum}; got {value!r}") from None
+    if not math.isfinite(f) or f != int(f):
+        raise TypeError(f"{name} must be a whole number >= {minimum}; got {value!r}")
+    n = int(f)
+    if n < minimum:
+        raise ValueError(f"{name} must be a whole number >= {minimum}; got {value!r}")
+    return n
+
+
+def check_max_range(max_range: Any, name: str = "max_range") -> float:
+    """The sensor's maximum range as a positive float (metres)."""
+    return check_positive(max_range, name, "metres")
+
+
+def check_angles(angles: ArrayLike, name: str = "angles") -> NDArray[np.float64]:
+    """Beam angles as a finite 1-D float array of radians (a scalar becomes one beam).
+
+    Values beyond ``2 pi`` in magnitude are taken for degrees and rejected with
+    the fix (``np.radians``).
+    """
+    a = np.asarray(angles, dtype=float)
+    if a.ndim == 0:
+        a = a.reshape(1)
+    if a.ndim != 1:
+        raise ValueError(f"{name} must be a 1-D array of beam angles in radians; got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite (radians relative to the sensor heading); found NaN or inf")
+    if a.size and float(np.max(np.abs(a))) > 2 * np.pi + 1e-9:
+        raise ValueError(f"{name}: beam angles must be radians in [-2 pi, 2 pi]; got values up to "
+                         f"{float(np.max(np.abs(a))):g} -- degrees? convert with np.radians({name})")
+    return a
+
+
+def check_grid(grid: Any, name: str = "grid"):
+    """``grid`` itself if it is a :class:`localize.OccupancyGrid`, else ``TypeError``."""
+    from .grid import OccupancyGrid  # grid.py imports this module
+
+    if not isinstance(grid, OccupancyGrid):
+        raise TypeError(f"{name} must be a localize.OccupancyGrid (see localize.maps); got {type(grid).__name__}")
+    return grid
+
+
+def check_sensor_poses(poses: ArrayLike, name: str = "poses") -> NDArray[np.float64]:
+    """One pose ``(3,)`` or many ``(N, 3)`` as a finite ``(N, 3)`` float array (no transposition warning)."""
+    p = as_poses(poses, name)
+    if p.ndim == 1:
+        p = p[None, :]
+    if p.ndim != 2:
+        raise ValueError(f"{name} must be an (N, 3) array of poses (x, y, theta); got shape {p.shape}")
+    return p
 
 
 class PoseShapeWarning(UserWarning):
