@@ -49,10 +49,33 @@ def shared_data():
     return d
 
 
+class GPS:
+    """A toy sensor for doctests: it measures a pose's x coordinate with Gaussian noise ``sigma`` (metres)."""
+
+    def __init__(self, sigma: float = 0.5) -> None:
+        self.sigma = sigma
+
+    def log_likelihood(self, poses, z):
+        return -0.5 * ((poses[:, 0] - z) / self.sigma) ** 2
+
+
+def toy_mcl():
+    """The filter of the ``MCL`` method doctests: 101 equally weighted particles on ``x = 0, 0.1, ..., 10`` m
+    (``y = theta = 0``), a motion ``u`` that shifts every particle by ``u`` metres along x, and a :class:`GPS`
+    sensor with 0.5 m noise; seeded with ``np.random.default_rng(0)``."""
+    from localize.mcl import MCL
+
+    particles = np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)])
+    shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]  # noqa: E731
+    return MCL(particles, shift, GPS(0.5), rng=np.random.default_rng(0))
+
+
 @pytest.fixture(autouse=True)
 def _doctest_namespace(doctest_namespace):
-    """Doctests in localize see numpy as ``np``."""
+    """Doctests in localize see numpy as ``np``, and the toy filter of the MCL examples (``GPS``, ``toy_mcl``)."""
     doctest_namespace["np"] = np
+    doctest_namespace["GPS"] = GPS
+    doctest_namespace["toy_mcl"] = toy_mcl
 
 
 # The book's .py files are jupytext twins of the notebooks, not modules:

@@ -816,12 +816,7 @@ class MCL:
 
         Examples
         --------
-        >>> class GPS:                     # measures x with 0.5 m noise
-        ...     def log_likelihood(self, poses, z):
-        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
-        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
-        >>> rng = np.random.default_rng(0)
-        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f = toy_mcl()      # 101 particles on x = 0..10 m; u shifts x; z is a GPS reading of x (0.5 m noise)
         >>> f.predict(1.0)
         >>> float(f.particles[0, 0]), float(f.particles[-1, 0])
         (1.0, 11.0)
@@ -845,12 +840,7 @@ class MCL:
 
         Examples
         --------
-        >>> class GPS:                     # measures x with 0.5 m noise
-        ...     def log_likelihood(self, poses, z):
-        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
-        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
-        >>> rng = np.random.default_rng(0)
-        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f = toy_mcl()      # 101 particles on x = 0..10 m; u shifts x; z is a GPS reading of x (0.5 m noise)
         >>> f.update(3.0)
         >>> int(np.argmax(f.weights)), round(float(f.weights.sum()), 6), round(f.status.n_eff, 1)
         (30, 1.0, 17.7)
@@ -937,12 +927,7 @@ class MCL:
 
         Examples
         --------
-        >>> class GPS:                     # measures x with 0.5 m noise
-        ...     def log_likelihood(self, poses, z):
-        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
-        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
-        >>> rng = np.random.default_rng(0)
-        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f = toy_mcl()      # 101 particles on x = 0..10 m; u shifts x; z is a GPS reading of x (0.5 m noise)
         >>> f.needs_resampling()           # equal weights: N_eff = N
         False
         >>> f.update(3.0)
@@ -965,12 +950,7 @@ class MCL:
 
         Examples
         --------
-        >>> class GPS:                     # measures x with 0.5 m noise
-        ...     def log_likelihood(self, poses, z):
-        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
-        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
-        >>> rng = np.random.default_rng(0)
-        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f = toy_mcl()      # 101 particles on x = 0..10 m; u shifts x; z is a GPS reading of x (0.5 m noise)
         >>> f.update(3.0)
         >>> f.resample()
         >>> bool(np.all(np.abs(f.particles[:, 0] - 3.0) < 2.0)), round(f.n_eff)
@@ -1017,12 +997,7 @@ class MCL:
 
         Examples
         --------
-        >>> class GPS:                     # measures x with 0.5 m noise
-        ...     def log_likelihood(self, poses, z):
-        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
-        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
-        >>> rng = np.random.default_rng(0)
-        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f = toy_mcl()      # 101 particles on x = 0..10 m; u shifts x; z is a GPS reading of x (0.5 m noise)
         >>> f.update(3.0)
         >>> e = f.estimate()
         >>> round(float(e.pose[0]), 1), round(float(e.std[0]), 2), e.n_clusters
@@ -1043,12 +1018,7 @@ class MCL:
 
         Examples
         --------
-        >>> class GPS:                     # measures x with 0.5 m noise
-        ...     def log_likelihood(self, poses, z):
-        ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
-        >>> shift = lambda poses, u, rng: poses + [u, 0.0, 0.0]
-        >>> rng = np.random.default_rng(0)
-        >>> f = MCL(np.column_stack([np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]), shift, GPS(), rng=rng)
+        >>> f = toy_mcl()      # 101 particles on x = 0..10 m; u shifts x; z is a GPS reading of x (0.5 m noise)
         >>> e = f.step(0.5, 3.0)          # move 0.5 m, then measure x = 3
         >>> round(float(e.pose[0]), 1), f.status.resampled
         (3.0, True)
@@ -1255,12 +1225,9 @@ def mcl_step_loop(
 
     Examples
     --------
-    >>> class GPS:
-    ...     def log_likelihood(self, poses, z):
-    ...         return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
     >>> move = lambda poses, u, rng: poses + [u, 0.0, 0.0]
     >>> p = np.column_stack([np.linspace(0, 4, 401), np.zeros(401), np.zeros(401)])
-    >>> new = mcl_step_loop(p, 1.0, (3.0,), move, GPS(), np.random.default_rng(0))
+    >>> new = mcl_step_loop(p, 1.0, (3.0,), move, GPS(0.5), np.random.default_rng(0))   # GPS: see conftest.py
     >>> round(float(new[:, 0].mean()), 1)
     3.0
     """
