@@ -15,7 +15,8 @@ Where the main names live:
 ==============================================================  ==============================================
 name                                                            module
 ==============================================================  ==============================================
-``MCL``, ``Augmented``, ``OdometryMotion``, ``VelocityMotion``  :mod:`localize.mcl` (chapters 7, 8)
+``MCL``, ``Augmented``                                          :mod:`localize.mcl` (chapters 7, 8)
+``OdometryMotion``, ``VelocityMotion``                          :mod:`localize.motion` (chapters 4, 7)
 ``KLDSampling``                                                 :mod:`localize.kld` (chapter 8)
 ``GridLocalizer``                                               :mod:`localize.gridloc` (chapter 3)
 ``BeamModel``, ``LikelihoodField``, ``LandmarkModel``           :mod:`localize.sensors` (chapter 5)
@@ -37,8 +38,8 @@ from .grid import OccupancyGrid
 _LAZY_NAMES = {
     "MCL": "mcl",
     "Augmented": "mcl",
-    "OdometryMotion": "mcl",
-    "VelocityMotion": "mcl",
+    "OdometryMotion": "motion",
+    "VelocityMotion": "motion",
     "KLDSampling": "kld",
     "GridLocalizer": "gridloc",
     "BeamModel": "sensors",

@@ -65,7 +65,7 @@ from . import __version__
 from ._output import RunOutput
 from ._resources import check_memory
 from .grid import OccupancyGrid
-from .mcl import ReversibleOdometry  # re-exported: it lived here before moving next to OdometryMotion
+from .motion import ReversibleOdometry  # re-exported: cli.ReversibleOdometry is its old name
 
 if TYPE_CHECKING:
     pass

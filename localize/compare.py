@@ -52,6 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import metrics as _metrics_mod
 from .ekf import EKFLocalizer, UKFLocalizer
 from .geometry import wrap_angle
+from .motion import VelocityMotion
 
 __all__ = [
     "FAIL_THRESHOLD",
@@ -479,7 +480,7 @@ def _make_filters(sc: Scenario, data: LandmarkData, rng: np.random.Generator, na
             else:
                 parts = _mcl.gaussian_particles(mean, cov, sc.n_particles, rng)
             opts = dict(augmented=_mcl.Augmented(0.01, 0.2, temperature=5.0)) if sc.recovery else {}
-            f = _mcl.MCL(parts, _mcl.VelocityMotion(sc.alphas, sc.dt), sensor, rng=rng, sampler=sampler, **opts)
+            f = _mcl.MCL(parts, VelocityMotion(sc.alphas, sc.dt), sensor, rng=rng, sampler=sampler, **opts)
             out[name] = _Particles(f, sc.known_ids)
         else:
             raise ValueError(f"filter names must be among {FILTERS}; got {name!r}")

@@ -29,8 +29,9 @@ re-draws the particles, see ``on_degenerate``) and says so in
 :attr:`MCL.status`.
 
 The motion model is any callable ``motion(poses, u, rng) -> poses``
-(:class:`OdometryMotion` and :class:`VelocityMotion` wrap
-:mod:`localize.motion`); the sensor model is any object with a method
+(:class:`~localize.motion.OdometryMotion` and
+:class:`~localize.motion.VelocityMotion` of :mod:`localize.motion`, also
+importable from here); the sensor model is any object with a method
 ``log_likelihood(poses, *z) -> (N,)`` (the range models and the landmark
 model of :mod:`localize.sensors`).
 """
@@ -43,13 +44,13 @@ from typing import Any, Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import motion as _motion
 from . import resample as _rs
 from ._checks import check_poses
 from .geometry import as_poses, wrap_angle
 from .geometry import relative as _relative
 from .grid import OccupancyGrid
 from .kld import KLDSampling, kld_sample_size
+from .motion import OdometryMotion, ReversibleOdometry, VelocityMotion  # noqa: F401  (re-exported: their old home)
 
 __all__ = [
     "MCL",
@@ -83,122 +84,6 @@ def _check_rng(rng: Any) -> np.random.Generator:
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator, e.g. np.random.default_rng(0); got {type(rng).__name__}")
     return rng
-
-
-# --------------------------------------------------------------------------- motion adapters
-class OdometryMotion:
-    """The odometry motion model as a particle mover: ``motion(poses, u, rng)``.
-
-    Wraps :func:`localize.motion.sample_odometry`; ``u = (prev_odom, odom)``
-    is the pair of odometry readings (PR table 5.6). ``alphas`` are the four
-    noise parameters of PR, entering as variances
-    ``alpha1*rot1**2 + alpha2*trans**2`` and so on. Keyword options (such as
-    ``min_std``, a floor on the noise that keeps a standing robot's particles
-    from collapsing) go to :func:`~localize.motion.sample_odometry`.
-
-    Examples
-    --------
-    >>> move = OdometryMotion((0.0, 0.0, 0.0, 0.0))          # noise-free
-    >>> p = move(np.zeros((2, 3)), ([0, 0, 0], [1, 0, 0]), np.random.default_rng(0))
-    >>> p.round(6)
-    array([[1., 0., 0.],
-           [1., 0., 0.]])
-    """
-
-    def __init__(self, alphas: ArrayLike = (0.005, 0.005, 0.01, 0.005), **options: Any) -> None:
-        a = np.asarray(alphas, dtype=float)
-        if a.shape != (4,) or np.any(~np.isfinite(a)) or np.any(a < 0):
-            raise ValueError(f"alphas must be four non-negative numbers (alpha1..alpha4 of PR table 5.6); got {alphas!r}")
-        self.alphas = a
-        self.options = options          # passed on: noise=, min_std=, ... (see sample_odometry)
-
-    def __call__(self, poses: NDArray[np.float64], u: Any, rng: np.random.Generator) -> NDArray[np.float64]:
-        return _motion.sample_odometry(poses, u, self.alphas, rng, **self.options)
-
-    def __repr__(self) -> str:
-        return f"OdometryMotion(alphas={tuple(round(float(a), 6) for a in self.alphas)})"
-
-
-class ReversibleOdometry:
-    """The odometry motion model (PR table 5.6) made safe for backward and on-the-spot motion.
-
-    The textbook model explains every motion as "turn towards the destination,
-    drive forward, turn". A robot that turns on the spot while its odometry
-    creeps a centimetre *backwards* then gets ``rot1`` near +-180 degrees, and
-    since the noise grows with ``rot1**2`` its particles scatter over metres.
-    Real logs are full of such steps (the Intel log's very first scans). The
-    fix used by ROS AMCL and others: a motion that goes backwards is the
-    forward motion of a robot facing the other way. Both odometry poses and
-    the particles are turned by 180 degrees, moved with the ordinary model,
-    and turned back. Forward motions are passed to
-    :func:`localize.motion.sample_odometry` unchanged.
-
-    Examples
-    --------
-    >>> back = ([0.0, 0.0, 0.0], [-0.02, 0.0, 0.5])      # creep back 2 cm while turning
-    >>> rng = np.random.default_rng(0)
-    >>> p = ReversibleOdometry((0.05, 0.05, 0.1, 0.05))(np.zeros((5000, 3)), back, rng)
-    >>> bool(np.abs(p[:, 0].mean() + 0.02) < 0.005), bool(p[:, :2].std(axis=0).max() < 0.2)
-    (True, True)
-    >>> from localize.motion import sample_odometry      # the plain model scatters the particles
-    >>> q = sample_odometry(np.zeros((5000, 3)), back, (0.05, 0.05, 0.1, 0.05), rng)
-    >>> bool(q[:, :2].std(axis=0).max() > 0.4)
-    True
-    """
-
-    def __init__(self, alphas: ArrayLike, min_trans: float = 1e-3) -> None:
-        a = np.asarray(alphas, dtype=float)
-        if a.shape != (4,) or np.any(~np.isfinite(a)) or np.any(a < 0):
-            raise ValueError(f"alphas must be four non-negative numbers (PR table 5.6); got {alphas!r}")
-        if not (np.isfinite(min_trans) and min_trans >= 0):
-            raise ValueError(f"min_trans must be a non-negative number of metres; got {min_trans!r}")
-        self.alphas = a
-        self.min_trans = float(min_trans)
-
-    def __call__(self, poses: NDArray[np.float64], u: Any, rng: np.random.Generator) -> NDArray[np.float64]:
-
-        p0, p1 = (np.asarray(v, dtype=float) for v in u)
-        step = _relative(p0, p1)
-        if step[0] < 0 and np.hypot(step[0], step[1]) > self.min_trans:
-            flip = np.array([0.0, 0.0, np.pi])
-            q = np.array(poses, dtype=float, copy=True)
-            q[:, 2] += np.pi
-            out = _motion.sample_odometry(q, (p0 + flip, p1 + flip), self.alphas, rng, min_trans=self.min_trans)
-            out[:, 2] = wrap_angle(out[:, 2] - np.pi)
-            return out
-        return _motion.sample_odometry(poses, (p0, p1), self.alphas, rng, min_trans=self.min_trans)
-
-    def __repr__(self) -> str:
-        return f"ReversibleOdometry(alphas={tuple(round(float(a), 6) for a in self.alphas)})"
-
-
-class VelocityMotion:
-    """The velocity motion model as a particle mover: ``motion(poses, (v, omega), rng)``.
-
-    Wraps :func:`localize.motion.sample_velocity` with a fixed time step
-    ``dt`` and the six ``alphas`` of PR table 5.3.
-
-    Examples
-    --------
-    >>> VelocityMotion((0.1,) * 6, dt=0.5).dt
-    0.5
-    """
-
-    def __init__(self, alphas: ArrayLike, dt: float, **options: Any) -> None:
-        a = np.asarray(alphas, dtype=float)
-        if a.shape != (6,) or np.any(~np.isfinite(a)) or np.any(a < 0):
-            raise ValueError(f"alphas must be six non-negative numbers (alpha1..alpha6 of PR table 5.3); got {alphas!r}")
-        if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be a positive time step in seconds; got {dt!r}")
-        self.alphas = a
-        self.dt = float(dt)
-        self.options = options
-
-    def __call__(self, poses: NDArray[np.float64], u: Any, rng: np.random.Generator) -> NDArray[np.float64]:
-        return _motion.sample_velocity(poses, u, self.dt, self.alphas, rng, **self.options)
-
-    def __repr__(self) -> str:
-        return f"VelocityMotion(alphas={tuple(round(float(a), 6) for a in self.alphas)}, dt={self.dt:g})"
 
 
 # --------------------------------------------------------------------------- initialisers

@@ -58,7 +58,8 @@ from typing import Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .geometry import as_poses, wrap_angle
+from ._checks import check_nonnegative, check_number, check_positive, check_rng
+from .geometry import as_poses, relative, wrap_angle
 
 __all__ = [
     "odometry_to_control",
@@ -77,6 +78,9 @@ __all__ = [
     "motion_model_odometry",
     "sample_motion_model_velocity",
     "motion_model_velocity",
+    "OdometryMotion",
+    "ReversibleOdometry",
+    "VelocityMotion",
     "MIN_TRANS",
 ]
 
@@ -111,32 +115,6 @@ def _check_alphas(alphas: ArrayLike, n: int) -> NDArray[np.float64]:
     return a
 
 
-def _check_rng(rng) -> np.random.Generator:
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"rng must be a numpy.random.Generator (np.random.default_rng(seed)); got {type(rng).__name__}")
-    return rng
-
-
-def _check_nonneg(value: float, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a real number; got {value!r}") from None
-    if not math.isfinite(v) or v < 0:
-        raise ValueError(f"{name} must be finite and >= 0; got {value!r}")
-    return v
-
-
-def _check_dt(dt: float) -> float:
-    try:
-        v = float(dt)
-    except (TypeError, ValueError):
-        raise TypeError(f"dt must be a real number of seconds; got {dt!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise ValueError(f"dt must be finite and > 0 seconds; got {dt!r}")
-    return v
-
-
 def _check_sign(sign: int) -> float:
     if sign not in (-1, 1):
         raise ValueError(f"sign must be -1 (subtract the noise) or +1 (add it); got {sign!r}")
@@ -161,6 +139,16 @@ def _velocity_control(u: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.flo
     if not np.all(np.isfinite(c)):
         raise ValueError(f"u (v, omega) must be finite; got NaN or infinite values in {c.tolist()}")
     return c[..., 0], c[..., 1]
+
+
+def _check_xy(xy: ArrayLike) -> NDArray[np.float64]:
+    """Positions ``(..., 2)`` as a finite float array (the domain of the ``*_pdf_xy`` densities)."""
+    q = np.asarray(xy, dtype=float)
+    if q.ndim == 0 or q.shape[-1] != 2:
+        raise ValueError(f"xy must have shape (..., 2); got shape {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise ValueError("xy contains NaN or infinite values")
+    return q
 
 
 def _broadcast_leading(name_a: str, a_shape: tuple, name_b: str, b_shape: tuple) -> tuple:
@@ -312,7 +300,7 @@ def odometry_to_control(prev_odom: ArrayLike, odom: ArrayLike,
     """
     p = as_poses(prev_odom, "prev_odom")
     q = as_poses(odom, "odom")
-    min_trans = _check_nonneg(min_trans, "min_trans")
+    min_trans = check_nonnegative(min_trans, "min_trans")
     dx = q[..., 0] - p[..., 0]
     dy = q[..., 1] - p[..., 1]
     trans = np.hypot(dx, dy)
@@ -361,7 +349,7 @@ def move_velocity(poses: ArrayLike, v: ArrayLike, omega: ArrayLike, dt: float,
     array([1.        , 1.        , 1.57079633])
     """
     p = as_poses(poses)
-    dt = _check_dt(dt)
+    dt = check_positive(dt, "dt", "seconds")
     v, w, g = (np.asarray(a, dtype=float) for a in (v, omega, gamma))
     half = 0.5 * w * dt
     chord = v * dt * np.sinc(half / math.pi)     # np.sinc(x) = sin(pi x)/(pi x)
@@ -484,15 +472,11 @@ def sample_forward(poses: ArrayLike, distance: float, sigma_distance: float, sig
     (0.99, 0.1)
     """
     p = as_poses(poses)
-    rng = _check_rng(rng)
-    d = float(distance)
-    if not math.isfinite(d):
-        raise ValueError(f"distance must be finite; got {distance!r}")
-    sd = _check_nonneg(sigma_distance, "sigma_distance")
-    sh = _check_nonneg(sigma_heading, "sigma_heading")
-    bd, bh = float(bias_distance), float(bias_heading)
-    if not (math.isfinite(bd) and math.isfinite(bh)):
-        raise ValueError("bias_distance and bias_heading must be finite")
+    rng = check_rng(rng)
+    d = check_number(distance, "distance", "metres")
+    sd = check_nonnegative(sigma_distance, "sigma_distance")
+    sh = check_nonnegative(sigma_heading, "sigma_heading")
+    bd, bh = check_number(bias_distance, "bias_distance", "metres"), check_number(bias_heading, "bias_heading", "radians")
     eps = rng.standard_normal(p.shape[:-1] + (2,))
     heading = p[..., 2] + bh + sh * eps[..., 1]
     dist = d + bd + sd * eps[..., 0]
@@ -522,17 +506,11 @@ def forward_pdf_xy(xy: ArrayLike, prev_pose: ArrayLike, distance: float, sigma_d
     >>> round(float(p.sum() * 0.01**2), 3)          # integrates to one
     1.0
     """
-    q = np.asarray(xy, dtype=float)
-    if q.ndim == 0 or q.shape[-1] != 2:
-        raise ValueError(f"xy must have shape (..., 2); got shape {q.shape}")
-    if not np.all(np.isfinite(q)):
-        raise ValueError("xy contains NaN or infinite values")
+    q = _check_xy(xy)
     p = as_poses(prev_pose, "prev_pose")
-    d = float(distance)
-    if not math.isfinite(d):
-        raise ValueError(f"distance must be finite; got {distance!r}")
-    sd = _check_nonneg(sigma_distance, "sigma_distance")
-    sh = _check_nonneg(sigma_heading, "sigma_heading")
+    d = check_number(distance, "distance", "metres")
+    sd = check_nonnegative(sigma_distance, "sigma_distance")
+    sh = check_nonnegative(sigma_heading, "sigma_heading")
     if sd == 0 or sh == 0:
         raise ValueError("sigma_distance and sigma_heading must be > 0 for a density over (x, y); "
                          f"got {sigma_distance!r}, {sigma_heading!r}")
@@ -553,7 +531,7 @@ def forward_pdf_xy(xy: ArrayLike, prev_pose: ArrayLike, distance: float, sigma_d
 def _odometry_setup(u, alphas, noise, min_std, min_trans):
     prev_odom, odom = _odometry_pair(u)
     alphas = _check_alphas(alphas, 4)
-    min_std = _check_nonneg(min_std, "min_std")
+    min_std = check_nonnegative(min_std, "min_std")
     rot1, trans, rot2 = odometry_to_control(prev_odom, odom, min_trans)
     s1, st, s2 = _stds(odometry_variances(rot1, trans, rot2, alphas, noise), min_std, ("rot1", "trans", "rot2"))
     return (np.asarray(rot1), np.asarray(trans), np.asarray(rot2)), (s1, st, s2)
@@ -604,7 +582,7 @@ def sample_odometry(poses: ArrayLike, u: ArrayLike, alphas: ArrayLike, rng: np.r
     (1.0, 0.2)
     """
     p = as_poses(poses)
-    rng = _check_rng(rng)
+    rng = check_rng(rng)
     sgn = _check_sign(sign)
     (rot1, trans, rot2), (s1, st, s2) = _odometry_setup(u, alphas, noise, min_std, min_trans)
     ctrl_shape = np.broadcast_shapes(rot1.shape, trans.shape, rot2.shape, s1.shape, st.shape, s2.shape)
@@ -787,11 +765,7 @@ def odometry_pdf_xy(xy: ArrayLike, u: ArrayLike, prev_pose: ArrayLike, alphas: A
     >>> round(float(p.sum() * 0.01**2), 3)
     1.0
     """
-    q = np.asarray(xy, dtype=float)
-    if q.ndim == 0 or q.shape[-1] != 2:
-        raise ValueError(f"xy must have shape (..., 2); got shape {q.shape}")
-    if not np.all(np.isfinite(q)):
-        raise ValueError("xy contains NaN or infinite values")
+    q = _check_xy(xy)
     p = as_poses(prev_pose, "prev_pose")
     (rot1, trans, rot2), (s1, st, s2) = _odometry_setup(u, alphas, noise, min_std, min_trans)
     _degenerate((s1, st), ("rot1", "trans"), "odometry position")
@@ -810,9 +784,9 @@ def odometry_pdf_xy(xy: ArrayLike, u: ArrayLike, prev_pose: ArrayLike, alphas: A
 
 def _velocity_setup(u, dt, alphas, noise, min_std):
     v, w = _velocity_control(u)
-    dt = _check_dt(dt)
+    dt = check_positive(dt, "dt", "seconds")
     alphas = _check_alphas(alphas, 6)
-    min_std = _check_nonneg(min_std, "min_std")
+    min_std = check_nonnegative(min_std, "min_std")
     sv, sw, sg = _stds(velocity_variances(v, w, alphas, noise), min_std, ("v", "omega", "gamma"))
     return v, w, dt, (sv, sw, sg)
 
@@ -853,7 +827,7 @@ def sample_velocity(poses: ArrayLike, u: ArrayLike, dt: float, alphas: ArrayLike
     array([0.96, 0.24, 0.5 ])
     """
     p = as_poses(poses)
-    rng = _check_rng(rng)
+    rng = check_rng(rng)
     sgn = _check_sign(sign)
     v, w, dt, (sv, sw, sg) = _velocity_setup(u, dt, alphas, noise, min_std)
     ctrl_shape = np.broadcast_shapes(v.shape, w.shape, sv.shape, sw.shape, sg.shape)
@@ -945,6 +919,108 @@ def velocity_pdf(pose: ArrayLike, u: ArrayLike, prev_pose: ArrayLike, dt: float,
 
 
 # ----------------------------------------------------------------------------
+# particle movers: a model with its parameters, called as motion(poses, u, rng)
+# ----------------------------------------------------------------------------
+
+class OdometryMotion:
+    """The odometry motion model as a particle mover: ``motion(poses, u, rng)``.
+
+    Wraps :func:`sample_odometry`; ``u = (prev_odom, odom)`` is the pair of
+    odometry readings (PR table 5.6). ``alphas`` are the four noise
+    parameters of PR, entering as variances ``alpha1*rot1**2 +
+    alpha2*trans**2`` and so on. Keyword options (such as ``min_std``, a floor
+    on the noise that keeps a standing robot's particles from collapsing) go
+    to :func:`sample_odometry`. :class:`localize.mcl.MCL` takes any such
+    callable as its ``motion``.
+
+    Examples
+    --------
+    >>> move = OdometryMotion((0.0, 0.0, 0.0, 0.0))          # noise-free
+    >>> p = move(np.zeros((2, 3)), ([0, 0, 0], [1, 0, 0]), np.random.default_rng(0))
+    >>> p.round(6)
+    array([[1., 0., 0.],
+           [1., 0., 0.]])
+    """
+
+    def __init__(self, alphas: ArrayLike = (0.005, 0.005, 0.01, 0.005), **options) -> None:
+        self.alphas = _check_alphas(alphas, 4)
+        self.options = options          # passed on: noise=, min_std=, ... (see sample_odometry)
+
+    def __call__(self, poses: NDArray[np.float64], u, rng: np.random.Generator) -> NDArray[np.float64]:
+        return sample_odometry(poses, u, self.alphas, rng, **self.options)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(alphas={tuple(round(float(a), 6) for a in self.alphas)})"
+
+
+class ReversibleOdometry(OdometryMotion):
+    """The odometry motion model (PR table 5.6) made safe for backward and on-the-spot motion.
+
+    The textbook model explains every motion as "turn towards the destination,
+    drive forward, turn". A robot that turns on the spot while its odometry
+    creeps a centimetre *backwards* then gets ``rot1`` near +-180 degrees, and
+    since the noise grows with ``rot1**2`` its particles scatter over metres.
+    Real logs are full of such steps (the Intel log's very first scans). The
+    fix used by ROS AMCL and others: a motion that goes backwards is the
+    forward motion of a robot facing the other way. Both odometry poses and
+    the particles are turned by 180 degrees, moved with the ordinary model,
+    and turned back. Forward motions are passed to :func:`sample_odometry`
+    unchanged.
+
+    Examples
+    --------
+    >>> back = ([0.0, 0.0, 0.0], [-0.02, 0.0, 0.5])      # creep back 2 cm while turning
+    >>> rng = np.random.default_rng(0)
+    >>> p = ReversibleOdometry((0.05, 0.05, 0.1, 0.05))(np.zeros((5000, 3)), back, rng)
+    >>> bool(np.abs(p[:, 0].mean() + 0.02) < 0.005), bool(p[:, :2].std(axis=0).max() < 0.2)
+    (True, True)
+    >>> q = sample_odometry(np.zeros((5000, 3)), back, (0.05, 0.05, 0.1, 0.05), rng)   # the plain model
+    >>> bool(q[:, :2].std(axis=0).max() > 0.4)                                         # scatters them
+    True
+    """
+
+    def __init__(self, alphas: ArrayLike, min_trans: float = 1e-3) -> None:
+        super().__init__(alphas, min_trans=check_nonnegative(min_trans, "min_trans", "metres"))
+        self.min_trans = self.options["min_trans"]
+
+    def __call__(self, poses: NDArray[np.float64], u, rng: np.random.Generator) -> NDArray[np.float64]:
+        p0, p1 = _odometry_pair(u)
+        step = relative(p0, p1)
+        if step[0] < 0 and math.hypot(step[0], step[1]) > self.min_trans:
+            flip = np.array([0.0, 0.0, math.pi])
+            q = np.array(poses, dtype=float, copy=True)
+            q[:, 2] += math.pi
+            out = super().__call__(q, (p0 + flip, p1 + flip), rng)
+            out[:, 2] = wrap_angle(out[:, 2] - math.pi)
+            return out
+        return super().__call__(poses, (p0, p1), rng)
+
+
+class VelocityMotion:
+    """The velocity motion model as a particle mover: ``motion(poses, (v, omega), rng)``.
+
+    Wraps :func:`sample_velocity` with a fixed time step ``dt`` and the six
+    ``alphas`` of PR table 5.3.
+
+    Examples
+    --------
+    >>> VelocityMotion((0.1,) * 6, dt=0.5).dt
+    0.5
+    """
+
+    def __init__(self, alphas: ArrayLike, dt: float, **options) -> None:
+        self.alphas = _check_alphas(alphas, 6)
+        self.dt = check_positive(dt, "dt", "seconds")
+        self.options = options
+
+    def __call__(self, poses: NDArray[np.float64], u, rng: np.random.Generator) -> NDArray[np.float64]:
+        return sample_velocity(poses, u, self.dt, self.alphas, rng, **self.options)
+
+    def __repr__(self) -> str:
+        return f"VelocityMotion(alphas={tuple(round(float(a), 6) for a in self.alphas)}, dt={self.dt:g})"
+
+
+# ----------------------------------------------------------------------------
 # readable versions (test oracles): one pose at a time, like the pseudocode
 # ----------------------------------------------------------------------------
 
@@ -983,7 +1059,7 @@ def sample_motion_model_odometry(pose: ArrayLike, u: ArrayLike, alphas: ArrayLik
     """
     x, y, theta = (float(c) for c in as_poses(pose, "pose").reshape(3))
     (xb, yb, thb), (xb2, yb2, thb2) = (tuple(float(c) for c in q.reshape(3)) for q in _odometry_pair(u))
-    z = _check_rng(rng).standard_normal(3)
+    z = check_rng(rng).standard_normal(3)
     # lines 2-4: the measured motion
     trans = math.hypot(xb2 - xb, yb2 - yb)
     rot1 = float(wrap_angle(math.atan2(yb2 - yb, xb2 - xb) - thb)) if trans > MIN_TRANS else 0.0
@@ -1059,8 +1135,8 @@ def sample_motion_model_velocity(pose: ArrayLike, u: ArrayLike, dt: float, alpha
     """
     x, y, theta = (float(c) for c in as_poses(pose, "pose").reshape(3))
     v, w = (float(c) for c in np.asarray(u, dtype=float).reshape(2))
-    dt = _check_dt(dt)
-    z = _check_rng(rng).standard_normal(3)
+    dt = check_positive(dt, "dt", "seconds")
+    z = check_rng(rng).standard_normal(3)
     var_v, var_w, var_g = (float(np.asarray(var)) for var in velocity_variances(v, w, alphas, noise))
     v_hat = v + sign * _sample(var_v, z[0])
     w_hat = w + sign * _sample(var_w, z[1])
@@ -1097,7 +1173,7 @@ def motion_model_velocity(pose: ArrayLike, u: ArrayLike, prev_pose: ArrayLike, d
     x2, y2, th2 = (float(c) for c in as_poses(pose, "pose").reshape(3))
     x, y, theta = (float(c) for c in as_poses(prev_pose, "prev_pose").reshape(3))
     v, w = (float(c) for c in np.asarray(u, dtype=float).reshape(2))
-    dt = _check_dt(dt)
+    dt = check_positive(dt, "dt", "seconds")
     var_v, var_w, var_g = (float(np.asarray(var)) for var in velocity_variances(v, w, alphas, noise))
     if min(var_v, var_w, var_g) <= 0:
         raise ValueError("the velocity density is degenerate: a noise variance is 0")

@@ -513,3 +513,18 @@ def test_degenerate_density_is_an_error_unless_min_std():
         velocity_pdf([1.0, 0.0, 0.0], (1.0, 0.0), [0, 0, 0], 1.0, np.zeros(6))
     # at the start position the density is large but finite
     assert np.isfinite(odometry_pdf([0.0, 0.0, 0.0], U, [0, 0, 0], [1, 1, 1, 1]))
+
+
+def test_particle_movers_live_in_motion_and_keep_their_old_names():
+    import localize
+    from localize import mcl, motion
+
+    for name in ("OdometryMotion", "ReversibleOdometry", "VelocityMotion"):
+        assert getattr(mcl, name) is getattr(motion, name)
+    assert localize.OdometryMotion is motion.OdometryMotion and localize.VelocityMotion is motion.VelocityMotion
+    with pytest.raises(ValueError, match="alphas"):
+        motion.OdometryMotion((0.1, 0.1))
+    with pytest.raises(ValueError, match="min_trans"):
+        motion.ReversibleOdometry((0.1,) * 4, min_trans=-1.0)
+    with pytest.raises(ValueError, match="dt"):
+        motion.VelocityMotion((0.1,) * 6, dt=0.0)
