@@ -54,7 +54,7 @@ import sys
 import textwrap
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
@@ -209,23 +209,36 @@ def make_sensor(kind: str, grid: OccupancyGrid, max_range: float, sensor_offset:
 
 @dataclass
 class RunResult:
-    """What :func:`localize_log` returns: per-scan estimates, the honest state and run statistics.
+    """What :func:`localize_log` returns: the run driver's record of every scan, with the scans' times.
 
-    ``state[k]`` is ``searching``, ``localized`` or ``lost`` (see
-    :class:`localize.mcl.StateRules`); ``trace`` is the run driver's full record
-    (:class:`localize.mcl.RunTrace`).
+    ``trace`` is :func:`localize.mcl.run_filter`'s :class:`~localize.mcl.RunTrace` (the one trace type);
+    the other attributes are read from it: ``estimates`` (its ``poses``), ``spread`` (the position spread
+    of *all* particles, ``hypot(std_x, std_y)``), ``n_eff``, ``updated``, ``seconds``, ``snapshots``,
+    ``state`` (``searching``, ``localized`` or ``lost``, see :class:`localize.mcl.StateRules`) and
+    ``covariances`` (``(K, 3, 3)``, the particles' variances on the diagonal, for the result bag).
     """
 
     times: NDArray[np.float64]
-    estimates: NDArray[np.float64]
-    spread: NDArray[np.float64]
-    n_eff: NDArray[np.float64]
-    updated: NDArray[np.bool_]
-    seconds: float
-    snapshots: dict = field(default_factory=dict)
-    covariances: NDArray[np.float64] | None = None  # (K, 3, 3) of the particles, per scan
-    state: NDArray[np.str_] | None = None
-    trace: Any = None
+    trace: Any
+
+    @property
+    def estimates(self) -> NDArray[np.float64]:
+        return self.trace.poses
+
+    @property
+    def spread(self) -> NDArray[np.float64]:
+        return np.hypot(self.trace.stds[:, 0], self.trace.stds[:, 1])
+
+    @property
+    def covariances(self) -> NDArray[np.float64]:
+        covs = np.zeros((len(self.trace), 3, 3))
+        covs[:, [0, 1, 2], [0, 1, 2]] = self.trace.stds ** 2
+        return covs
+
+    def __getattr__(self, name: str) -> Any:
+        if name in ("n_eff", "updated", "seconds", "snapshots", "state"):
+            return getattr(self.trace, name)
+        raise AttributeError(f"RunResult has no attribute {name!r}")
 
     @property
     def seconds_per_scan(self) -> float:
@@ -377,12 +390,7 @@ def localize_log(
                     snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
                     restart_after=restart_after,
                     callback=None if progress is None else progress.update)
-    spread = np.sqrt(tr.stds[:, 0] ** 2 + tr.stds[:, 1] ** 2)
-    covs = np.zeros((k_scans, 3, 3))  # the particles' spread per scan (x, y, theta variances), for the result bag
-    covs[:, [0, 1, 2], [0, 1, 2]] = tr.stds ** 2
-    return RunResult(times=np.asarray(log.times), estimates=tr.poses, spread=spread, n_eff=tr.n_eff,
-                     updated=tr.updated, seconds=tr.seconds, snapshots=tr.snapshots, covariances=covs,
-                     state=tr.state, trace=tr)
+    return RunResult(times=np.asarray(log.times), trace=tr)
 
 
 # ============================================================================ outputs

@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import resample as _rs
-from ._checks import check_poses
+from ._checks import check_count, check_grid, check_nonnegative, check_poses, check_positive, check_rng
 from .geometry import as_poses, wrap_angle
 from .geometry import relative as _relative
 from .grid import OccupancyGrid
@@ -80,12 +80,6 @@ Sampler = Callable[[int, np.random.Generator], NDArray[np.float64]]
 RESAMPLERS = tuple(_rs.RESAMPLERS)
 
 
-def _check_rng(rng: Any) -> np.random.Generator:
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"rng must be a numpy.random.Generator, e.g. np.random.default_rng(0); got {type(rng).__name__}")
-    return rng
-
-
 # --------------------------------------------------------------------------- initialisers
 def uniform_particles(grid: OccupancyGrid, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
     """``n`` poses drawn uniformly over the known-free cells of ``grid``, headings uniform.
@@ -101,9 +95,7 @@ def uniform_particles(grid: OccupancyGrid, n: int, rng: np.random.Generator) -> 
     >>> p.shape, bool(g.is_free(p).all())
     ((500, 3), True)
     """
-    if not isinstance(grid, OccupancyGrid):
-        raise TypeError(f"grid must be an OccupancyGrid; got {type(grid).__name__}")
-    return grid.sample_free(_check_n(n), _check_rng(rng))
+    return check_grid(grid).sample_free(check_count(n, "n"), check_rng(rng))
 
 
 def gaussian_particles(
@@ -132,19 +124,9 @@ def gaussian_particles(
         raise ValueError("cov must be symmetric")
     if np.linalg.eigvalsh(c).min() < -1e-12:
         raise ValueError("cov must be positive semi-definite")
-    p = _check_rng(rng).multivariate_normal(m, c, size=_check_n(n), method="eigh")
+    p = check_rng(rng).multivariate_normal(m, c, size=check_count(n, "n"), method="eigh")
     p[:, 2] = wrap_angle(p[:, 2])
     return p
-
-
-def _check_n(n: Any) -> int:
-    try:
-        k = int(n)
-    except (TypeError, ValueError):
-        raise TypeError(f"n must be an integer number of particles; got {n!r}") from None
-    if k != n or k < 1:
-        raise ValueError(f"n must be a whole number of particles >= 1; got {n!r}")
-    return k
 
 
 # --------------------------------------------------------------------------- estimate
@@ -274,8 +256,7 @@ def estimate_pose(
         if np.any(~np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
             raise ValueError("weights must be finite, non-negative and not all zero")
         w = w / w.sum()
-    if not (np.isfinite(cluster_size) and cluster_size > 0):
-        raise ValueError(f"cluster_size must be a positive length in metres; got {cluster_size!r}")
+    cluster_size = check_positive(cluster_size, "cluster_size", "metres")
     if not 0.0 <= min_share < 1.0:
         raise ValueError(f"min_share must lie in [0, 1); got {min_share!r}")
     if not 0.0 < mass <= 1.0:
@@ -424,8 +405,7 @@ class Augmented:
             raise ValueError(
                 f"alpha_fast must lie in (alpha_slow, 1) = ({self.alpha_slow}, 1); got {self.alpha_fast!r}"
             )
-        if not (np.isfinite(self.temperature) and self.temperature > 0):
-            raise ValueError(f"temperature must be a positive number; got {self.temperature!r}")
+        check_positive(self.temperature, "temperature")
 
 
 # --------------------------------------------------------------------------- the filter
@@ -535,7 +515,7 @@ class MCL:
         unknown_penalty: float = 0.0,
         min_ess: float = 0.0,
     ) -> None:
-        self.rng = _check_rng(rng)
+        self.rng = check_rng(rng)
         p = check_poses(particles, "particles")  # (N, 3); warns on a (3, 3) that looks transposed
         if p.ndim != 2 or p.shape[0] < 1:
             raise ValueError(f"particles must be an (N, 3) array with N >= 1; got shape {p.shape}")
@@ -565,7 +545,8 @@ class MCL:
                 f"(e.g. localize.sensors.BeamModel); got {type(sensor).__name__}"
             )
         self.sensor = sensor
-        self.resampler_name, self._resample_fn = _get_resampler(resampler)
+        self._resample_fn = _rs.get_resampler(resampler)
+        self.resampler_name = resampler if isinstance(resampler, str) else getattr(resampler, "__name__", "custom")
         thr = float(resample_threshold)
         if not 0.0 <= thr <= 1.0:
             raise ValueError(f"resample_threshold must lie in [0, 1] (a fraction of N); got {resample_threshold!r}")
@@ -585,9 +566,7 @@ class MCL:
         if kld is not None and not isinstance(kld, KLDSampling):
             raise TypeError(f"kld must be a localize.kld.KLDSampling or None; got {type(kld).__name__}")
         self.kld = kld
-        if grid is not None and not isinstance(grid, OccupancyGrid):
-            raise TypeError(f"grid must be an OccupancyGrid or None; got {type(grid).__name__}")
-        self.grid = grid
+        self.grid = None if grid is None else check_grid(grid)
         if sampler is None and grid is not None:
             sampler = grid.sample_free
         self.sampler = sampler
@@ -606,9 +585,7 @@ class MCL:
         if not 0.0 <= me < 1.0:
             raise ValueError(f"min_ess must be a fraction in [0, 1); got {min_ess!r}")
         self.min_ess = me
-        pen = float(unknown_penalty)
-        if not (np.isfinite(pen) and pen >= 0):
-            raise ValueError(f"unknown_penalty must be a number >= 0; got {unknown_penalty!r}")
+        pen = check_nonnegative(unknown_penalty, "unknown_penalty")
         self.unknown_penalty = pen if (free_space_only and unknown_allowed) else 0.0
         if self.free_space_only:
             allowed = ~grid.occupied if unknown_allowed else grid.free
@@ -644,7 +621,7 @@ class MCL:
         >>> f.n, round(f.status.n_eff)
         (1000, 1000)
         """
-        rng = _check_rng(rng)
+        rng = check_rng(rng)
         options.setdefault("grid", grid)
         return cls(uniform_particles(grid, n, rng), motion, sensor, rng=rng, **options)
 
@@ -673,7 +650,7 @@ class MCL:
         >>> f.estimate().pose.round(1)
         array([1. , 2. , 0.5])
         """
-        rng = _check_rng(rng)
+        rng = check_rng(rng)
         return cls(gaussian_particles(mean, cov, n, rng), motion, sensor, rng=rng, **options)
 
     # ------------------------------------------------------------ properties
@@ -756,14 +733,7 @@ class MCL:
         if self.min_ess > 0:
             ll, st.beta = _adaptive_temper(self.log_weights, ll, self.min_ess * n)
         lw = self.log_weights + ll
-        # log-sum-exp by hand: the shifted exponentials also give N_eff without a second pass
-        top = float(lw.max())
-        if np.isfinite(top):
-            e = np.exp(lw - top)
-            total = float(e.sum())
-            lnorm = top + float(np.log(total))
-        else:
-            lnorm = -np.inf
+        w, lnorm = _rs.normalize_log_weights(lw)      # log-sum-exp; lnorm = -inf when no particle fits
         st.n_invalid = n_bad
         st.log_evidence = lnorm
         st.message = f"{n_bad} invalid likelihood(s) treated as zero" if n_bad else ""
@@ -789,7 +759,7 @@ class MCL:
             self.log_weights = lw
             if self.augmented is not None:
                 self._update_averages(lnorm)
-            st.n_eff = total * total / float(e @ e)
+            st.n_eff = float(1.0 / (w @ w))
 
     def _update_averages(self, log_w_avg: float) -> None:
         a = self.augmented
@@ -888,10 +858,9 @@ class MCL:
         >>> round(float(e.pose[0]), 1), round(float(e.std[0]), 2), e.n_clusters
         (3.0, 0.5, 1)
         """
-        if not (np.isfinite(cluster_size) and cluster_size > 0):
-            raise ValueError(f"cluster_size must be a positive length in metres; got {cluster_size!r}")
         w = self.weights
-        return _estimate(self.particles, w / w.sum(), float(cluster_size), float(min_share), float(mass))
+        return _estimate(self.particles, w / w.sum(), check_positive(cluster_size, "cluster_size", "metres"),
+                         float(min_share), float(mass))
 
     def step(self, u: Any, *z: Any, **kwargs: Any) -> Estimate:
         """One full filter step: predict, update, estimate, resample if the policy says so.
@@ -945,64 +914,13 @@ class MCL:
 
 
 # --------------------------------------------------------------------------- running a log
-@dataclass(frozen=True, eq=False)
-class MCLTrace:
-    """What a filter did over a run, one row per step (see :func:`run_mcl`).
-
-    Attributes
-    ----------
-    poses : ndarray (T, 3)
-        The estimate (``Estimate.pose``: mean of the best cluster) at each step.
-    means, stds : ndarray (T, 3)
-        Weighted mean and spread of all particles.
-    best_weight : ndarray (T,)
-        Weight share of the best cluster.
-    n_particles : ndarray (T,) of int
-        Particles used in the step's update (changes with KLD-sampling).
-    n_eff : ndarray (T,)
-        Effective sample size after the update.
-    resampled, degenerate : ndarray (T,) of bool
-    n_injected : ndarray (T,) of int
-    p_inject : ndarray (T,)
-    beam_evaluations : int
-        Total particle x beam likelihood evaluations: the run's work, a
-        machine-independent measure of its cost.
-    snapshots : dict[int, tuple[ndarray, ndarray]]
-        ``step -> (particles, weights)`` after the update of that step,
-        for the steps asked for.
-    state : ndarray (T,) of str
-        The run driver's honest state at each step (see :class:`StateRules`).
-
-    Examples
-    --------
-    See :func:`run_mcl`, which makes them.
-    """
-
-    poses: NDArray[np.float64]
-    means: NDArray[np.float64]
-    stds: NDArray[np.float64]
-    best_weight: NDArray[np.float64]
-    n_particles: NDArray[np.int64]
-    n_eff: NDArray[np.float64]
-    resampled: NDArray[np.bool_]
-    degenerate: NDArray[np.bool_]
-    n_injected: NDArray[np.int64]
-    p_inject: NDArray[np.float64]
-    beam_evaluations: int
-    snapshots: dict = field(default_factory=dict)
-    state: NDArray[np.str_] | None = None
-
-    def __len__(self) -> int:
-        return int(self.poses.shape[0])
-
-
 def run_mcl(
     mcl: "MCL",
     run: Any,
     snapshot_steps: Any = (),
     n_steps: int | None = None,
-) -> MCLTrace:
-    """Run a filter over a recorded (or simulated) range run and record what it did.
+) -> "RunTrace":
+    """Run a filter over a recorded (or simulated) range run and record what it did (a :class:`RunTrace`).
 
     ``run`` is anything with ``ranges (T, B)``, ``angles (B,)`` and
     ``control(k)`` giving the motion into step ``k`` -- a
@@ -1042,19 +960,15 @@ def run_mcl(
     if not 1 <= t <= ranges.shape[0]:
         raise ValueError(f"n_steps must lie in [1, {ranges.shape[0]}]; got {n_steps!r}")
     # the one driver, without gating or recovery: every step predicts and measures
-    tr = run_filter(mcl, t, run.control, lambda k: (ranges[k], angles), snapshot_steps=snapshot_steps,
-                    recover=False)
-    return MCLTrace(tr.poses, tr.means, tr.stds, tr.best_weight, tr.n_particles, tr.n_eff, tr.resampled,
-                    tr.degenerate, tr.n_injected, tr.p_inject, tr.beam_evaluations, tr.snapshots, tr.state)
+    return run_filter(mcl, t, run.control, lambda k: (ranges[k], angles), snapshot_steps=snapshot_steps,
+                      recover=False)
 
 
 # --------------------------------------------------------------------------- helpers
 def _ess(lw: NDArray) -> float:
-    top = lw.max()
-    if not np.isfinite(top):
-        return 0.0
-    e = np.exp(lw - top)
-    return float(e.sum() ** 2 / (e @ e))
+    """Effective sample size of log-weights ``lw`` (0 when every weight is zero)."""
+    n_eff = _rs.effective_sample_size_log(lw)
+    return 0.0 if np.isnan(n_eff) else n_eff
 
 
 def _adaptive_temper(log_w: NDArray, ll: NDArray, target: float) -> tuple[NDArray, float]:
@@ -1082,14 +996,6 @@ def _adaptive_temper(log_w: NDArray, ll: NDArray, target: float) -> tuple[NDArra
 def _ema_log(log_old: float, log_new: float, alpha: float) -> float:
     """``log((1 - alpha) * exp(log_old) + alpha * exp(log_new))`` without leaving log space."""
     return float(np.logaddexp(np.log1p(-alpha) + log_old, np.log(alpha) + log_new))
-
-
-def _get_resampler(r: Any) -> tuple[str, Callable]:
-    if callable(r):
-        return getattr(r, "__name__", "custom"), r
-    if isinstance(r, str) and r in RESAMPLERS:
-        return r, _rs.get_resampler(r)
-    raise ValueError(f"resampler must be one of {RESAMPLERS} or a callable f(weights, rng) -> indices; got {r!r}")
 
 
 # --------------------------------------------------------------------------- the oracle
@@ -1314,6 +1220,10 @@ class RunTrace:
             "degenerate_updates": int(self.degenerate.sum()),
             "events": [[int(k), str(t)] for k, t in self.events],
         }
+
+
+#: The old name of :class:`RunTrace` (what :func:`run_mcl` returned before the run driver was one).
+MCLTrace = RunTrace
 
 
 def _intervals(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:

@@ -52,6 +52,8 @@ from typing import Any, Callable, Iterable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._checks import check_count, check_number, check_rng
+
 __all__ = [
     "DegenerateWeightsError",
     "multinomial",
@@ -69,8 +71,6 @@ __all__ = [
     "effective_sample_size_log",
     "normalize_log_weights",
     "logsumexp",
-    "is_degenerate",
-    "weight_diagnostics",
     "weight_variance",
     "ess_from_weight_variance",
     "weight_variance_from_ess",
@@ -91,13 +91,6 @@ class DegenerateWeightsError(ValueError):
 
 
 # --------------------------------------------------------------------- checks
-def _check_rng(rng) -> None:
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(
-            f"rng must be a numpy.random.Generator (e.g. np.random.default_rng(0)); got {type(rng).__name__}"
-        )
-
-
 def _check_weights(weights: ArrayLike, name: str = "weights") -> NDArray[np.float64]:
     """Validated weights divided by their sum (float64, 1-D, non-empty).
 
@@ -131,14 +124,20 @@ def _check_weights(weights: ArrayLike, name: str = "weights") -> NDArray[np.floa
     return w / w.sum()
 
 
-def _check_n(n: int | None, default: int) -> int:
-    if n is None:
-        return default
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
-        raise TypeError(f"n must be an int number of samples to draw; got {type(n).__name__}")
-    if n < 0:
-        raise ValueError(f"n must be >= 0; got {n}")
-    return int(n)
+def _resampler_args(weights: ArrayLike, rng: Any, n: int | None) -> tuple[NDArray[np.float64], int]:
+    """What every resampler checks: a generator, valid weights (normalised here) and the number of draws
+    (one per particle when ``n`` is None, else a whole number >= 0)."""
+    check_rng(rng)
+    w = _check_weights(weights)
+    return w, (w.size if n is None else check_count(n, "n", minimum=0))
+
+
+def _check_threshold(threshold: float) -> float:
+    """The adaptive-resampling threshold: a fraction of N in [0, 1]."""
+    t = check_number(threshold, "threshold")
+    if not 0.0 <= t <= 1.0:
+        raise ValueError(f"threshold must be a fraction of N in [0, 1]; got {threshold!r}")
+    return t
 
 
 def _cdf(w: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -184,9 +183,7 @@ def multinomial_loop(weights: ArrayLike, rng: np.random.Generator, n: int | None
     >>> multinomial_loop([0.0, 1.0, 0.0], np.random.default_rng(0))
     array([1, 1, 1])
     """
-    _check_rng(rng)
-    w = _check_weights(weights)
-    n = _check_n(n, w.size)
+    w, n = _resampler_args(weights, rng, n)
     last = _last_positive(w)
     out = np.empty(n, dtype=np.int64)
     for m in range(n):
@@ -211,9 +208,7 @@ def stratified_loop(weights: ArrayLike, rng: np.random.Generator, n: int | None 
     >>> stratified_loop([0.5, 0.5], np.random.default_rng(0))
     array([0, 1])
     """
-    _check_rng(rng)
-    w = _check_weights(weights)
-    n = _check_n(n, w.size)
+    w, n = _resampler_args(weights, rng, n)
     last = _last_positive(w)
     u = (rng.random(n) + np.arange(n)) / n if n else np.empty(0)
     out = np.empty(n, dtype=np.int64)
@@ -241,9 +236,7 @@ def systematic_loop(weights: ArrayLike, rng: np.random.Generator, n: int | None 
     >>> systematic_loop([0.1, 0.2, 0.3, 0.4], np.random.default_rng(3), n=10)
     array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3])
     """
-    _check_rng(rng)
-    w = _check_weights(weights)
-    n = _check_n(n, w.size)
+    w, n = _resampler_args(weights, rng, n)
     last = _last_positive(w)
     r = rng.random()
     out = np.empty(n, dtype=np.int64)
@@ -270,9 +263,7 @@ def residual_loop(weights: ArrayLike, rng: np.random.Generator, n: int | None = 
     >>> residual_loop([0.5, 0.25, 0.25], np.random.default_rng(0), n=4)
     array([0, 0, 1, 2])
     """
-    _check_rng(rng)
-    w = _check_weights(weights)
-    n = _check_n(n, w.size)
+    w, n = _resampler_args(weights, rng, n)
     out = []
     frac = np.empty(w.size)
     for i in range(w.size):
@@ -333,9 +324,7 @@ def multinomial(weights: ArrayLike, rng: np.random.Generator, n: int | None = No
     >>> bool(np.all(idx != 1))
     True
     """
-    _check_rng(rng)
-    w = _check_weights(weights)
-    n = _check_n(n, w.size)
+    w, n = _resampler_args(weights, rng, n)
     return _search(_cdf(w), _sorted_uniforms(n, rng), _last_positive(w))
 
 
@@ -350,9 +339,7 @@ def stratified(weights: ArrayLike, rng: np.random.Generator, n: int | None = Non
     >>> stratified([0.25, 0.25, 0.5], np.random.default_rng(1))
     array([0, 2, 2])
     """
-    _check_rng(rng)
-    w = _check_weights(weights)
-    n = _check_n(n, w.size)
+    w, n = _resampler_args(weights, rng, n)
     u = (rng.random(n) + np.arange(n)) / n if n else np.empty(0)
     return _search(_cdf(w), u, _last_positive(w))
 
@@ -379,9 +366,7 @@ def systematic(weights: ArrayLike, rng: np.random.Generator, n: int | None = Non
     >>> systematic([0.1, 0.2, 0.3, 0.4], np.random.default_rng(3), n=10)
     array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3])
     """
-    _check_rng(rng)
-    w = _check_weights(weights)
-    n = _check_n(n, w.size)
+    w, n = _resampler_args(weights, rng, n)
     r = rng.random()
     cdf = _cdf(w)
     k = np.ceil(n * cdf - r)
@@ -420,9 +405,7 @@ def residual(
     >>> np.bincount(idx, minlength=4)      # 2 and 1 copies are certain
     array([2, 1, 1, 0])
     """
-    _check_rng(rng)
-    w = _check_weights(weights)
-    n = _check_n(n, w.size)
+    w, n = _resampler_args(weights, rng, n)
     if remainder not in ("multinomial", "stratified", "systematic"):
         raise ValueError(f"remainder must be 'multinomial', 'stratified' or 'systematic'; got {remainder!r}")
     scaled = n * w
@@ -520,18 +503,6 @@ def _check_log_weights(log_weights: ArrayLike) -> NDArray[np.float64]:
     return a
 
 
-def is_degenerate(log_weights: ArrayLike) -> bool:
-    """True when no particle has a usable weight (all log-weights ``-inf`` or NaN).
-
-    Examples
-    --------
-    >>> is_degenerate([-np.inf, np.nan]), is_degenerate([-np.inf, -5e3])
-    (True, False)
-    """
-    a = np.asarray(log_weights, dtype=float)
-    return bool(a.size == 0 or not np.any(np.isfinite(a) | np.isposinf(a)))
-
-
 def normalize_log_weights(
     log_weights: ArrayLike, strict: bool = False
 ) -> tuple[NDArray[np.float64], float]:
@@ -587,35 +558,6 @@ def normalize_log_weights(
     e = np.exp(a - m)
     s = e.sum()
     return e / s, float(m + np.log(s))
-
-
-def weight_diagnostics(log_weights: ArrayLike) -> dict[str, float | int | bool]:
-    """Summary of a set of log-weights: what a filter reports after an update.
-
-    Returns a dict with ``n``, ``n_nan`` (NaN entries), ``n_zero``
-    (``-inf`` or NaN entries), ``degenerate`` (no usable weight),
-    ``log_norm`` and ``ess`` (effective sample size; ``nan`` when
-    degenerate).
-
-    Examples
-    --------
-    >>> d = weight_diagnostics([0.0, 0.0, -np.inf, np.nan])
-    >>> d["n_nan"], d["n_zero"], d["degenerate"], round(d["ess"], 6)
-    (1, 2, False, 2.0)
-    """
-    a = _check_log_weights(log_weights)
-    n_nan = int(np.isnan(a).sum())
-    n_zero = int((np.isnan(a) | np.isneginf(a)).sum())
-    w, L = normalize_log_weights(a)
-    degenerate = not np.isfinite(L)
-    return {
-        "n": int(a.size),
-        "n_nan": n_nan,
-        "n_zero": n_zero,
-        "degenerate": bool(degenerate),
-        "log_norm": float(L),
-        "ess": float("nan") if degenerate else float(1.0 / np.sum(w * w)),
-    }
 
 
 # ------------------------------------------------- effective sample size
@@ -685,7 +627,7 @@ def ess_from_weight_variance(variance: float, n: int) -> float:
     >>> round(ess_from_weight_variance(1e-6, 1000), 3)   # std 1e-3 halves N_eff
     500.0
     """
-    n = _positive_int(n, "n")
+    n = check_count(n, "n")
     v = float(variance)
     if not v >= 0:
         raise ValueError(f"variance must be >= 0; got {variance!r}")
@@ -700,7 +642,7 @@ def weight_variance_from_ess(ess: float, n: int) -> float:
     >>> weight_variance_from_ess(500, 1000)
     1e-06
     """
-    n = _positive_int(n, "n")
+    n = check_count(n, "n")
     e = float(ess)
     if not 1.0 <= e <= n:
         raise ValueError(f"ess must lie in [1, n] = [1, {n}]; got {ess!r}")
@@ -718,19 +660,9 @@ def needs_resampling(weights: ArrayLike, threshold: float = 0.5) -> bool:
     >>> needs_resampling([0.25, 0.25, 0.25, 0.25]), needs_resampling([0.97, 0.01, 0.01, 0.01])
     (False, True)
     """
-    t = float(threshold)
-    if not 0.0 <= t <= 1.0:
-        raise ValueError(f"threshold must be a fraction of N in [0, 1]; got {threshold!r}")
+    t = _check_threshold(threshold)
     w = _check_weights(weights)
     return bool(effective_sample_size(w) < t * w.size)
-
-
-def _positive_int(n, name: str) -> int:
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
-        raise TypeError(f"{name} must be an int; got {type(n).__name__}")
-    if n < 1:
-        raise ValueError(f"{name} must be >= 1; got {n}")
-    return int(n)
 
 
 def offspring_moments(
@@ -750,10 +682,10 @@ def offspring_moments(
     """
     fn = get_resampler(resampler)
     w = _check_weights(weights)
-    n_reps = _positive_int(n_reps, "n_reps")
+    n_reps = check_count(n_reps, "n_reps")
     counts = np.empty((n_reps, w.size))
     for k in range(n_reps):
-        counts[k] = np.bincount(fn(w, rng), minlength=w.size)
+        counts[k] = offspring_counts(fn(w, rng), w.size)
     return counts.mean(axis=0), counts.var(axis=0, ddof=1) if n_reps > 1 else np.zeros(w.size)
 
 
@@ -846,11 +778,9 @@ def bootstrap_filter(
     >>> bool(abs(estimate - z.mean()) < 0.05), int(res.resampled.sum()) < 20   # the posterior mean is z's mean
     (True, True)
     """
-    _check_rng(rng)
+    check_rng(rng)
     fn = get_resampler(resampler)
-    t = float(threshold)
-    if not 0.0 <= t <= 1.0:
-        raise ValueError(f"threshold must be a fraction of N in [0, 1]; got {threshold!r}")
+    t = _check_threshold(threshold)
     x = np.array(initial, dtype=float, copy=True)
     if x.ndim < 1 or x.shape[0] == 0:
         raise ValueError(f"initial must hold N >= 1 particles along its first axis; got shape {x.shape}")

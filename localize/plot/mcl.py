@@ -2,7 +2,7 @@
 
 Every function draws with matplotlib and returns what it made; none runs a
 filter. The data come from :func:`localize.mcl.run_mcl` (an
-:class:`~localize.mcl.MCLTrace` with snapshots) and a simulated run.
+:class:`~localize.mcl.RunTrace` with snapshots) and a simulated run.
 """
 
 from __future__ import annotations
@@ -123,7 +123,7 @@ def snapshot_strip(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLike |
     Parameters
     ----------
     snapshots : dict
-        ``step -> (particles, weights)`` as in :attr:`localize.mcl.MCLTrace.snapshots`.
+        ``step -> (particles, weights)`` as in :attr:`localize.mcl.RunTrace.snapshots`.
     true_poses, estimates : array_like (T, 3), optional
         Drawn at each snapshot's step.
     steps : sequence of int, optional

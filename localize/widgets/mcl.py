@@ -65,7 +65,7 @@ def simulate(
     Returns
     -------
     run : localize.sim.RangeRun
-    trace : localize.mcl.MCLTrace
+    trace : localize.mcl.RunTrace
         With a snapshot ``(particles, weights)`` at every step.
 
     Examples
