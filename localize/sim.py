@@ -52,8 +52,11 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._checks import check_count, check_rng
 from .geometry import as_poses, compose, relative, wrap_angle
 from .grid import OccupancyGrid
+from .io import cmu as _cmu
+from .io.cmu import CMU_ANGLES  # re-exported: the CMU scanner's 180 beams, the default of range_run
 from .maps import draw_box
 from .motion import move_velocity, sample_odometry, sample_velocity
 
@@ -73,23 +76,11 @@ __all__ = [
     "DEFAULT_ODOMETRY_ALPHAS",
 ]
 
-#: Beam angles of a CMU 16-831 style scanner: 180 beams, -90 .. +89 degrees.
-CMU_ANGLES: NDArray[np.float64] = np.radians(np.arange(-90.0, 90.0, 1.0))
-CMU_ANGLES.setflags(write=False)
 
 #: Odometry noise of the simulated robot (PR alphas, variances): a few
 #: percent of the motion, the order of magnitude of a real differential drive.
 DEFAULT_ODOMETRY_ALPHAS: tuple[float, float, float, float] = (0.02, 0.0005, 0.02, 0.0005)
 
-_CM_NO_RETURN = 8183.0
-
-
-def _check_rng(rng: Any) -> np.random.Generator:
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(
-            f"rng must be a numpy.random.Generator (e.g. np.random.default_rng(0)); got {type(rng).__name__}"
-        )
-    return rng
 
 
 def _readonly(*arrays: NDArray) -> None:
@@ -196,6 +187,30 @@ class RangeRun:
         out = np.stack([prev, self.odometry], axis=1)
         out.flags.writeable = False
         return out
+
+    def to_log(self, odometry_rate: int = 1):
+        """The run as a :class:`localize.io.LaserLog`, what a robot would have recorded (plus the truth).
+
+        ``odometry`` and the scans are the run's; the true poses become the
+        log's reference ``poses``; every ``odometry_rate``-th step also gives
+        an odometry record (``odom_times``, ``odom_poses``). The io writers
+        (:func:`localize.io.write_cmu_log`, ...) write it.
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> run = range_run(office(), np.random.default_rng(0), n_steps=4, sensor="ideal")
+        >>> log = run.to_log(odometry_rate=2)
+        >>> len(log), log.n_beams, log.odom_times.tolist() == run.times[::2].tolist()
+        (4, 180, True)
+        """
+        from .io import LaserLog
+
+        rate = check_count(odometry_rate, "odometry_rate")
+        return LaserLog(times=self.times, odometry=self.odometry, ranges=self.ranges, angles=self.angles,
+                        max_range=self.max_range, sensor_offset=self.sensor_offset, poses=self.poses,
+                        odom_times=self.times[::rate], odom_poses=self.odometry[::rate], format="sim",
+                        source="localize.sim.range_run")
 
     @property
     def sensor_poses(self) -> NDArray[np.float64]:
@@ -314,7 +329,7 @@ def add_clutter(grid: OccupancyGrid, n: int, rng: np.random.Generator, size: tup
     >>> boxes.shape, int(world.occupied.sum() - g.occupied.sum()) > 0
     ((3, 4), True)
     """
-    rng = _check_rng(rng)
+    rng = check_rng(rng)
     n = int(n)
     if n < 0:
         raise ValueError(f"n must be >= 0; got {n}")
@@ -376,7 +391,7 @@ def odometry_readings(poses: ArrayLike, alphas: ArrayLike, rng: np.random.Genera
            [ 4.      ,  5.      , -3.141593],
            [ 4.      ,  4.      , -1.570796]])
     """
-    rng = _check_rng(rng)
+    rng = check_rng(rng)
     p = as_poses(poses)
     if p.ndim != 2:
         raise ValueError(f"poses must be a (T, 3) trajectory; got shape {p.shape}")
@@ -461,7 +476,7 @@ def wander_path(world: OccupancyGrid, n_steps: int, rng: np.random.Generator, st
     >>> poses.shape, bool(np.all(g.distance_at(poses[:, :2]) >= 0.25))
     ((50, 3), True)
     """
-    rng = _check_rng(rng)
+    rng = check_rng(rng)
     n_steps = int(n_steps)
     if n_steps < 1:
         raise ValueError(f"n_steps must be >= 1; got {n_steps}")
@@ -635,7 +650,7 @@ def range_run(
     >>> bool(np.all(run.ranges <= run.max_range))
     True
     """
-    rng = _check_rng(rng)
+    rng = check_rng(rng)
     if not isinstance(grid, OccupancyGrid):
         raise TypeError(f"grid must be an OccupancyGrid; got {type(grid).__name__}")
     n_steps = int(n_steps)
@@ -787,7 +802,7 @@ def landmark_run(
     >>> z.shape[1], bool(np.all(z[:, 0] <= run.max_range))
     (2, True)
     """
-    rng = _check_rng(rng)
+    rng = check_rng(rng)
     n_steps = int(n_steps)
     if n_steps < 1:
         raise ValueError(f"n_steps must be >= 1; got {n_steps}")
@@ -848,22 +863,13 @@ def landmark_run(
 # =========================================================================
 def write_cmu_log(path: str | os.PathLike, run: RangeRun, decimals: int = 3, odometry_rate: int = 1,
                   angle_decimals: int = 6) -> Path:
-    """Write a :class:`RangeRun` as a CMU 16-831 style robot log.
+    """Write a :class:`RangeRun` as a CMU 16-831 style robot log: :func:`localize.io.write_cmu_log` of
+    :meth:`RangeRun.to_log` (see there for the format).
 
-    The format (one record per line, centimetres, radians, seconds)::
-
-        O x y theta ts
-        L x y theta xl yl thetal r1 ... r180 ts
-
-    ``x y theta`` is the odometry pose of the robot centre, ``xl yl thetal``
-    the laser's pose in the same frame (``sensor_offset`` ahead: 25 cm on the
-    course's robot), ``r1 .. r180`` the ranges from -90 degrees
-    counter-clockwise in 1 degree steps, rounded to whole centimetres, and a
-    reading of 8183 means "no return". Positions are written with
-    ``decimals`` digits after the point (in cm), angles with
-    ``angle_decimals`` (in radians). Each step gives an ``O`` record
-    followed by an ``L`` record at the same time stamp (only every
-    ``odometry_rate``-th step writes an ``O`` record).
+    Each step gives an ``O`` record followed by an ``L`` record at the same
+    time stamp (only every ``odometry_rate``-th step writes an ``O`` record);
+    positions are written with ``decimals`` digits after the point (in cm),
+    angles with ``angle_decimals`` (in radians).
 
     The run must have been simulated with the CMU beam layout
     (``angles=CMU_ANGLES``, the default of :func:`range_run`) and a maximum
@@ -882,32 +888,7 @@ def write_cmu_log(path: str | os.PathLike, run: RangeRun, decimals: int = 3, odo
     """
     if not isinstance(run, RangeRun):
         raise TypeError(f"run must be a RangeRun; got {type(run).__name__}")
-    if run.angles.shape != CMU_ANGLES.shape or not np.allclose(run.angles, CMU_ANGLES, atol=1e-9):
-        raise ValueError("a CMU log has 180 beams at -90 .. +89 degrees; simulate with angles=CMU_ANGLES")
-    if run.max_range * 100.0 >= _CM_NO_RETURN:
-        raise ValueError(f"max_range must be below {_CM_NO_RETURN / 100} m to be written; got {run.max_range}")
-    odometry_rate = int(odometry_rate)
-    if odometry_rate < 1:
-        raise ValueError(f"odometry_rate must be >= 1; got {odometry_rate}")
-    laser = compose(run.odometry, run.sensor_offset)
-    fmt = f"{{:.{int(decimals)}f}}"
-    afmt = f"{{:.{int(angle_decimals)}f}}"
-
-    def pose_fields(x, y, th):
-        return [fmt.format(x * 100), fmt.format(y * 100), afmt.format(th)]
-
-    out = Path(path)
-    with open(out, "w") as f:
-        for k in range(len(run)):
-            ts = f"{run.times[k]:.6f}"
-            o = run.odometry[k]
-            if k % odometry_rate == 0:
-                f.write("O " + " ".join(pose_fields(*o)) + f" {ts}\n")
-            cm = np.where(run.ranges[k] >= run.max_range, _CM_NO_RETURN, np.round(run.ranges[k] * 100.0))
-            head = pose_fields(*o) + pose_fields(*laser[k])
-            f.write("L " + " ".join(head) + " "
-                    + " ".join(f"{v:.0f}" for v in cm) + f" {ts}\n")
-    return out
+    return _cmu.write_cmu_log(path, run.to_log(odometry_rate), decimals, angle_decimals)
 
 
 # =========================================================================
@@ -1076,7 +1057,7 @@ def corridor_run(
     """
     from .maps import hallway
 
-    rng = _check_rng(rng)
+    rng = check_rng(rng)
     n_steps = int(n_steps)
     if n_steps < 1:
         raise ValueError(f"n_steps must be >= 1; got {n_steps}")

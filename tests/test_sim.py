@@ -5,7 +5,7 @@ import importlib.util
 import numpy as np
 import pytest
 
-from localize import maps, sim
+from localize import io, maps, sim
 from localize.geometry import compose, relative, wrap_angle
 from localize.motion import move_velocity, odometry_to_control
 from localize.raycast import cast
@@ -240,7 +240,8 @@ def test_write_cmu_log_format(tmp_path, office):
     r = L[6:186]
     no_return = run.ranges[1] >= run.max_range
     assert np.all(r[no_return] == 8183)
-    assert np.allclose(r[~no_return], np.round(run.ranges[1, ~no_return] * 100))
+    # whole cm; a reading just below max_range stays below it (799 cm, not the 800 cm that would read as no return)
+    assert np.allclose(r[~no_return], np.minimum(np.round(run.ranges[1, ~no_return] * 100), run.max_range * 100 - 1))
     assert L[-1] == pytest.approx(run.times[1])
 
 
@@ -254,6 +255,19 @@ def test_write_cmu_log_round_trips_through_the_reader(tmp_path, office):
     hit = run.ranges < run.max_range
     assert np.allclose(log.ranges[hit], run.ranges[hit], atol=0.006)
     assert np.all(log.ranges[~hit] >= log.max_range)
+
+
+def test_a_simulated_run_converts_to_a_log_that_the_io_writer_writes(tmp_path, office):
+    run = sim.range_run(office, np.random.default_rng(11), n_steps=5, sensor_offset=(0.25, 0, 0), max_range=8.0)
+    log = run.to_log()
+    assert np.array_equal(log.ranges, run.ranges) and np.array_equal(log.poses, run.poses)
+    assert np.array_equal(log.odom_poses, run.odometry) and log.max_range == run.max_range
+    a = io.write_cmu_log(tmp_path / "io.log", log).read_text()
+    assert a == sim.write_cmu_log(tmp_path / "sim.log", run).read_text()
+    assert sim.CMU_ANGLES is io.CMU_ANGLES
+    with pytest.raises(ValueError, match="max_range must be below 81.83"):
+        sim.write_cmu_log(tmp_path / "far.log", sim.range_run(office, np.random.default_rng(0), n_steps=2,
+                                                               max_range=90.0))
 
 
 def test_write_cmu_log_rejects_other_layouts(tmp_path, office):

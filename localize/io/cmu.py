@@ -48,7 +48,7 @@ from ..grid import OccupancyGrid
 from ._common import FormatError, LaserLog, ParseWarning, SkipCounter, median_offset, parse_floats, read_lines
 
 __all__ = ["read_cmu_map", "write_cmu_map", "read_cmu_log", "write_cmu_log", "CMU_ANGLES", "CMU_MAX_RANGE",
-           "CMU_SENSOR_OFFSET"]
+           "CMU_NO_RETURN_CM", "CMU_SENSOR_OFFSET"]
 
 PathLike = str | os.PathLike
 
@@ -57,6 +57,8 @@ CMU_ANGLES: NDArray[np.float64] = np.radians(np.arange(-90.0, 90.0, 1.0))
 CMU_ANGLES.setflags(write=False)
 #: Readings at or above 8000 cm (80 m) mean "no return".
 CMU_MAX_RANGE = 80.0
+#: What a CMU log writes for "no return" (centimetres): every reading at or above ``max_range``.
+CMU_NO_RETURN_CM = 8183
 #: The laser sits 25 cm ahead of the robot centre.
 CMU_SENSOR_OFFSET: NDArray[np.float64] = np.array([0.25, 0.0, 0.0])
 CMU_SENSOR_OFFSET.setflags(write=False)
@@ -354,14 +356,24 @@ def read_cmu_log(
     )
 
 
-def write_cmu_log(path: PathLike, log: LaserLog, decimals: int = 3) -> Path:
+def write_cmu_log(path: PathLike, log: LaserLog, decimals: int = 3, angle_decimals: int = 6) -> Path:
     """Write a :class:`LaserLog` as a CMU 16-831 log (cm, 180 beams from -90 degrees).
 
-    ``O`` records are written for the log's odometry records, interleaved with
-    the ``L`` records by time; readings at or above ``max_range`` are written as
-    8183 cm, other ranges rounded to whole cm, positions to ``decimals`` digits
-    of a cm, angles to 1e-6 rad. The log must have the CMU beam layout
-    (:data:`CMU_ANGLES`).
+    The format (one record per line, centimetres, radians, seconds)::
+
+        O x y theta ts
+        L x y theta xl yl thetal r1 ... r180 ts
+
+    ``x y theta`` is the odometry pose of the robot centre, ``xl yl thetal``
+    the laser's pose in the same frame (``sensor_offset`` ahead). ``O``
+    records are written for the log's odometry records, interleaved with the
+    ``L`` records by time (an ``O`` record first at equal times); readings at
+    or above ``max_range`` are written as 8183 cm (:data:`CMU_NO_RETURN_CM`),
+    other ranges rounded to whole cm, positions to ``decimals`` digits of a
+    cm, angles to ``angle_decimals`` digits of a radian. The log must have the
+    CMU beam layout (:data:`CMU_ANGLES`) and a ``max_range`` below 81.83 m. A
+    simulated run is written through :meth:`localize.sim.RangeRun.to_log`
+    (or :func:`localize.sim.write_cmu_log`).
 
     Examples
     --------
@@ -376,22 +388,27 @@ def write_cmu_log(path: PathLike, log: LaserLog, decimals: int = 3) -> Path:
     if not isinstance(log, LaserLog):
         raise TypeError(f"log must be a LaserLog; got {type(log).__name__}")
     if log.n_beams != CMU_ANGLES.size or not np.allclose(log.angles, CMU_ANGLES, atol=1e-9):
-        raise ValueError("the CMU format stores 180 beams at -90..+89 degrees; select or resample the beams first")
+        raise ValueError("the CMU format stores 180 beams at -90..+89 degrees; select or resample the beams first "
+                         "(a simulation: range_run(..., angles=CMU_ANGLES), its default)")
+    if log.max_range * 100.0 >= CMU_NO_RETURN_CM:
+        raise ValueError(f"max_range must be below {CMU_NO_RETURN_CM / 100} m to be written (a CMU log writes "
+                         f"{CMU_NO_RETURN_CM} cm for no return); got {log.max_range}")
     laser = compose(log.odometry, log.sensor_offset)
     records: list[tuple[float, int, str]] = []
-    fmt = f"{{:.{decimals}f}}"
+    fmt = f"{{:.{int(decimals)}f}}"
+    afmt = f"{{:.{int(angle_decimals)}f}}"
+
+    def pose(p: NDArray) -> str:
+        return f"{fmt.format(p[0] * 100)} {fmt.format(p[1] * 100)} {afmt.format(p[2])}"
+
     for k in range(len(log)):
         # whole cm; a reading just below max_range must not round up to "no return"
         below = np.minimum(np.round(log.ranges[k] * 100.0), np.ceil(log.max_range * 100.0) - 1.0)
-        r = np.where(log.ranges[k] >= log.max_range, 8183.0, below)
-        o, lp = log.odometry[k], laser[k]
-        head = (f"{fmt.format(o[0] * 100)} {fmt.format(o[1] * 100)} {o[2]:.6f} "
-                f"{fmt.format(lp[0] * 100)} {fmt.format(lp[1] * 100)} {lp[2]:.6f}")
-        txt = "L " + head + " " + " ".join(f"{v:.0f}" for v in r)
+        r = np.where(log.ranges[k] >= log.max_range, float(CMU_NO_RETURN_CM), below)
+        txt = f"L {pose(log.odometry[k])} {pose(laser[k])} " + " ".join(f"{v:.0f}" for v in r)
         records.append((float(log.times[k]), 1, txt + f" {log.times[k]:.6f}"))
     for t, p in zip(log.odom_times, log.odom_poses):
-        txt = f"O {fmt.format(p[0] * 100)} {fmt.format(p[1] * 100)} {p[2]:.6f} {t:.6f}"
-        records.append((float(t), 0, txt))
+        records.append((float(t), 0, f"O {pose(p)} {t:.6f}"))
     records.sort(key=lambda r: (r[0], r[1]))
     out = Path(path)
     with open(out, "w") as f:
