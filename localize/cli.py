@@ -60,8 +60,10 @@ from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from tqdm import tqdm
 
 from . import __version__
+from ._checks import check_rng
 from ._output import RunOutput
 from ._resources import check_memory
 from .grid import OccupancyGrid
@@ -122,56 +124,38 @@ DEFAULTS: dict[str, Any] = {
 
 
 # ============================================================================ progress
-class Progress:
-    """A one-line progress bar on a terminal; silent when the stream is not a terminal.
+class Progress(tqdm):
+    """tqdm's progress bar over the scans, drawn only when the stream is a terminal.
+
+    :meth:`update_to` takes the number of scans done so far (what
+    :func:`localize.mcl.run_filter` passes its ``callback``).
 
     Examples
     --------
     >>> import io
     >>> buf = io.StringIO()                       # not a terminal: nothing is drawn
     >>> p = Progress(10, stream=buf)
-    >>> p.update(5); p.close()
+    >>> p.update_to(5); p.close()
     >>> buf.getvalue()
     ''
-    >>> p = Progress(10, stream=buf, enabled=True, width=10)
-    >>> p.update(5)
-    >>> "[#####.....]  5/10 scans" in buf.getvalue()
+    >>> p = Progress(10, stream=buf, enabled=True)
+    >>> p.update_to(10); p.close()          # redrawn at most every 0.1 s, and when closed
+    >>> "10/10 scans" in buf.getvalue()
     True
     """
 
     def __init__(self, total: int, stream: TextIO | None = None, enabled: bool | None = None,
-                 width: int = 30, label: str = "scans") -> None:
-        self.total = max(int(total), 1)
-        self.stream = sys.stderr if stream is None else stream
+                 label: str = "scans") -> None:
+        stream = sys.stderr if stream is None else stream
         if enabled is None:
-            enabled = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.enabled = enabled
-        self.width = int(width)
-        self.label = label
-        self.t0 = time.perf_counter()
-        self._last = -1.0
+            enabled = bool(getattr(stream, "isatty", lambda: False)())
+        super().__init__(total=max(int(total), 1), file=stream, disable=not enabled, unit=" " + label,
+                         bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt}{unit} [{elapsed}<{remaining}]",
+                         dynamic_ncols=True)
 
-    def update(self, done: int, extra: str = "") -> None:
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if done < self.total and now - self._last < 0.1:
-            return
-        self._last = now
-        frac = min(done / self.total, 1.0)
-        n = int(round(frac * self.width))
-        el = now - self.t0
-        eta = el / done * (self.total - done) if done else float("nan")
-        digits = len(str(self.total))
-        msg = (f"\r[{'#' * n}{'.' * (self.width - n)}] {done:>{digits}}/{self.total} {self.label}"
-               f"  {el:5.1f} s elapsed, ETA {eta:4.0f} s {extra}")
-        self.stream.write(msg)
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            self.stream.write("\n")
-            self.stream.flush()
+    def update_to(self, done: int) -> None:
+        """Move the bar to ``done`` scans."""
+        self.update(int(done) - self.n)
 
 
 # ============================================================================ the filter run
@@ -357,8 +341,7 @@ def localize_log(
     """
     from .mcl import MCL, run_filter
 
-    if rng is None or not isinstance(rng, np.random.Generator):
-        raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    check_rng(rng)
     if init not in ("global", "reference"):
         raise ValueError(f"init must be 'global' or 'reference'; got {init!r}")
     if beams is not None and beams < log.n_beams:
@@ -389,7 +372,7 @@ def localize_log(
                     min_motion=tuple(min_motion), rules=rules, snapshot_steps=snap_steps,
                     snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
                     restart_after=restart_after,
-                    callback=None if progress is None else progress.update)
+                    callback=None if progress is None else progress.update_to)
     return RunResult(times=np.asarray(log.times), trace=tr)
 
 
@@ -592,66 +575,31 @@ def _save_animation(anim, path: Path, writer, dpi: int) -> None:
 
 
 # ============================================================================ argument parsing
-def _positive_int(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number; got {s!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a number >= 1; got {v}")
-    return v
+def _number_type(cast: type, expect: str, ok: Any, name: str) -> Any:
+    """An argparse ``type``: the option's text as ``cast`` (int or float), finite and with ``ok(value)`` true.
+
+    Its error says what was expected (``expect``), which argparse prefixes with the option's name.
+    """
+
+    def parse(s: str):
+        try:
+            v = cast(s)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {expect}; got {s!r}") from None
+        if not (np.isfinite(v) and ok(v)):
+            raise argparse.ArgumentTypeError(f"expected {expect}; got {s}")
+        return v
+
+    parse.__name__ = name
+    return parse
 
 
-def _positive_float(s: str) -> float:
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number; got {s!r}") from None
-    if not (np.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number; got {s}")
-    return v
-
-
-def _nonneg_float(s: str) -> float:
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number; got {s!r}") from None
-    if not (np.isfinite(v) and v >= 0):
-        raise argparse.ArgumentTypeError(f"expected a number >= 0; got {s}")
-    return v
-
-
-def _seed(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0; got {s!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0 (a random generator's seed); got {v}")
-    return v
-
-
-def _unit_fraction(s: str) -> float:
-    """A number in (0, 1]."""
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number; got {s!r}") from None
-    if not (np.isfinite(v) and 0 < v <= 1):
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1]; got {s}")
-    return v
-
-
-def _fraction(s: str) -> float:
-    """A number in [0, 1)."""
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number; got {s!r}") from None
-    if not (np.isfinite(v) and 0 <= v < 1):
-        raise argparse.ArgumentTypeError(f"expected a fraction in [0, 1); got {s}")
-    return v
+_positive_int = _number_type(int, "a whole number >= 1", lambda v: v >= 1, "positive_int")
+_positive_float = _number_type(float, "a positive number", lambda v: v > 0, "positive_float")
+_nonneg_float = _number_type(float, "a number >= 0", lambda v: v >= 0, "nonneg_float")
+_seed = _number_type(int, "a whole number >= 0 (a random generator's seed)", lambda v: v >= 0, "seed")
+_unit_fraction = _number_type(float, "a number in (0, 1]", lambda v: 0 < v <= 1, "unit_fraction")
+_fraction = _number_type(float, "a fraction in [0, 1)", lambda v: 0 <= v < 1, "fraction")
 
 
 def _wrap(text: str, width: int = 79) -> str:

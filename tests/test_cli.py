@@ -110,14 +110,14 @@ def test_progress_bar_only_on_a_terminal():
             return True
 
     t = Tty()
-    p = cli.Progress(4, stream=t, width=8)
+    p = cli.Progress(4, stream=t)
     for k in range(1, 5):
-        p.update(k)
+        p.update_to(k)
     p.close()
-    assert "[########] 4/4 scans" in t.getvalue() and t.getvalue().endswith("\n")
+    assert "100%" in t.getvalue() and "4/4 scans" in t.getvalue() and t.getvalue().endswith("\n")
     piped = stdio.StringIO()
     p = cli.Progress(4, stream=piped)
-    p.update(4)
+    p.update_to(4)
     p.close()
     assert piped.getvalue() == ""
 
@@ -157,7 +157,7 @@ def test_bad_file_content_names_file_and_line(sim_files, tmp_path):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["run", "--log", "x", "--map", "y", "--particles", "0"], "expected a number >= 1"),
+        (["run", "--log", "x", "--map", "y", "--particles", "0"], "expected a whole number >= 1"),
         (["run", "--log", "x", "--map", "y", "--particles", "many"], "expected a whole number"),
         (["run", "--log", "x", "--map", "y", "--sensor", "sonar"], "invalid choice"),
         (["run", "--log", "x", "--map", "y", "--scans", "a:b"], "START:STOP"),
