@@ -98,6 +98,24 @@ class SkipCounter:
             raise FormatError(self.path, line, message)
         self.add("malformed records", line, message)
 
+    def floats(self, tokens: list[str], line: int, what: str, on_error: str = "raise") -> NDArray[np.float64] | None:
+        """:func:`parse_floats` of one record; a field that is not a finite number is :meth:`malformed`
+        (with ``on_error="skip"``: counted, and None returned so that the reader skips the record).
+
+        Examples
+        --------
+        >>> c = SkipCounter("a.log")
+        >>> c.floats(["1", "2.5"], 3, "O record")
+        array([1. , 2.5])
+        >>> c.floats(["1", "x"], 4, "O record", on_error="skip") is None, c.as_dict()
+        (True, {'malformed records': 1})
+        """
+        try:
+            return parse_floats(tokens, self.path, line, what)
+        except FormatError as e:
+            self.malformed(line, e.reason, on_error)
+            return None
+
     def warn(self, stacklevel: int = 3) -> None:
         if not self.counts:
             return
@@ -152,6 +170,15 @@ def read_lines(path: PathLike) -> Iterator[tuple[int, str]]:
                 yield n, line
         except GZIP_ERRORS as exc:
             raise FormatError(path, n + 1, f"the compressed stream is damaged or truncated ({exc})") from None
+
+
+def read_records(path: PathLike) -> Iterator[tuple[int, list[str]]]:
+    """Yield ``(line_number, tokens)`` of each record of a text log: the lines that are neither blank nor
+    ``#`` comments, split at white space (the CMU and CARMEN logs)."""
+    for n, raw in read_lines(path):
+        tokens = raw.split()
+        if tokens and not tokens[0].startswith("#"):
+            yield n, tokens
 
 
 def parse_floats(tokens: list[str], path: PathLike | None, line: int, what: str) -> NDArray[np.float64]:

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import as_poses, compose, relative, wrap_angle
-from ._common import FormatError, LaserLog, SkipCounter, median_offset, parse_floats, read_lines
+from ._common import FormatError, LaserLog, SkipCounter, median_offset, parse_floats, read_records
 
 __all__ = ["read_carmen_log", "write_carmen_log", "carmen_angles", "KNOWN_SKIPPED"]
 
@@ -142,10 +142,7 @@ def read_carmen_log(
     def bad(n: int, msg: str) -> None:
         skips.malformed(n, msg, on_error)
 
-    for n, raw in read_lines(path):
-        tokens = raw.split()
-        if not tokens or tokens[0].startswith("#"):
-            continue
+    for n, tokens in read_records(path):
         kind = tokens[0]
         if kind == "FLASER":
             try:
@@ -164,10 +161,8 @@ def read_carmen_log(
                 bad(n, f"expected {beams['FLASER'][0]} readings like the first FLASER (line {beams['FLASER'][1]}); "
                        f"got {nb}")
                 continue
-            try:
-                v = parse_floats(tokens[2:nb + 9], path, n, "FLASER")
-            except FormatError as e:
-                bad(n, e.reason)
+            v = skips.floats(tokens[2:nb + 9], n, "FLASER", on_error)
+            if v is None:
                 continue
             r = v[:nb]
             if np.any(r < 0):
@@ -199,10 +194,8 @@ def read_carmen_log(
                 bad(n, f"ODOM has 10 fields (ODOM x y theta tv rv accel timestamp host logger_timestamp); "
                        f"got {len(tokens)}")
                 continue
-            try:
-                v = parse_floats(tokens[1:8], path, n, "ODOM")
-            except FormatError as e:
-                bad(n, e.reason)
+            v = skips.floats(tokens[1:8], n, "ODOM", on_error)
+            if v is None:
                 continue
             odom.append((record, v[6], v[:3]))
             record += 1
@@ -215,10 +208,8 @@ def read_carmen_log(
             if len(tokens) not in (2, 5):
                 bad(n, f"NEFF is 'NEFF value [timestamp host logger_timestamp]' (2 or 5 fields); got {len(tokens)}")
                 continue
-            try:
-                v = parse_floats(tokens[1:2], path, n, "NEFF")
-            except FormatError as e:
-                bad(n, e.reason)
+            v = skips.floats(tokens[1:2], n, "NEFF", on_error)
+            if v is None:
                 continue
             neff.append((record, float(v[0])))
         elif _KEYWORD.match(kind):

@@ -45,7 +45,16 @@ from numpy.typing import NDArray
 
 from ..geometry import compose
 from ..grid import OccupancyGrid
-from ._common import FormatError, LaserLog, ParseWarning, SkipCounter, median_offset, parse_floats, read_lines
+from ._common import (
+    FormatError,
+    LaserLog,
+    ParseWarning,
+    SkipCounter,
+    median_offset,
+    parse_floats,
+    read_lines,
+    read_records,
+)
 
 __all__ = ["read_cmu_map", "write_cmu_map", "read_cmu_log", "write_cmu_log", "CMU_ANGLES", "CMU_MAX_RANGE",
            "CMU_NO_RETURN_CM", "CMU_SENSOR_OFFSET"]
@@ -297,19 +306,14 @@ def read_cmu_log(
     def bad(n: int, msg: str) -> None:
         skips.malformed(n, msg, on_error)
 
-    for n, raw in read_lines(path):
-        tokens = raw.split()
-        if not tokens or tokens[0].startswith("#"):
-            continue
+    for n, tokens in read_records(path):
         kind = tokens[0]
         if kind == "O":
             if len(tokens) != 5:
                 bad(n, f"an odometry record is 'O x y theta ts' (5 fields); got {len(tokens)}")
                 continue
-            try:
-                v = parse_floats(tokens[1:], path, n, "odometry record 'O x y theta ts'")
-            except FormatError as e:
-                bad(n, e.reason)
+            v = skips.floats(tokens[1:], n, "odometry record 'O x y theta ts'", on_error)
+            if v is None:
                 continue
             odo_t.append(v[3])
             odo_p.append(np.array([v[0] / 100.0, v[1] / 100.0, v[2]]))
@@ -318,10 +322,8 @@ def read_cmu_log(
                 bad(n, f"a laser record is 'L x y theta xl yl thetal r1 ... r{n_beams} ts' ({n_l} fields); "
                        f"got {len(tokens)}")
                 continue
-            try:
-                v = parse_floats(tokens[1:], path, n, "laser record 'L x y theta xl yl thetal r1..r180 ts'")
-            except FormatError as e:
-                bad(n, e.reason)
+            v = skips.floats(tokens[1:], n, "laser record 'L x y theta xl yl thetal r1..r180 ts'", on_error)
+            if v is None:
                 continue
             r = v[6:6 + n_beams]
             if np.any(r < 0):
