@@ -109,18 +109,21 @@ def detect_log_format(path: PathLike) -> str:
     raise FormatError(path, None, "the file holds no records (only blank or comment lines)")
 
 
+def _read(path: PathLike, format: str | None, detect, readers: dict, kwargs: dict):
+    """``readers[format](path, **kwargs)``, the format detected from the content when it is None."""
+    fmt = format or detect(path)
+    if fmt not in readers:
+        raise ValueError(f"format must be one of {tuple(readers)} or None (detect); got {format!r}")
+    return readers[fmt](path, **kwargs)
+
+
 def read_map(path: PathLike, format: str | None = None, **kwargs) -> OccupancyGrid:
     """Read a map of any supported format (detected from the content unless ``format`` is given).
 
     Keyword arguments go to :func:`~localize.io.read_ros_map` or
     :func:`~localize.io.read_cmu_map`.
     """
-    fmt = format or detect_map_format(path)
-    if fmt == "cmu":
-        return read_cmu_map(path, **kwargs)
-    if fmt == "ros":
-        return read_ros_map(path, **kwargs)
-    raise ValueError(f"format must be one of {MAP_FORMATS} or None (detect); got {format!r}")
+    return _read(path, format, detect_map_format, {"cmu": read_cmu_map, "ros": read_ros_map}, kwargs)
 
 
 def read_log(path: PathLike, format: str | None = None, **kwargs) -> LaserLog:
@@ -129,9 +132,4 @@ def read_log(path: PathLike, format: str | None = None, **kwargs) -> LaserLog:
     Keyword arguments go to :func:`~localize.io.read_cmu_log` or
     :func:`~localize.io.read_carmen_log`.
     """
-    fmt = format or detect_log_format(path)
-    if fmt == "cmu":
-        return read_cmu_log(path, **kwargs)
-    if fmt == "carmen":
-        return read_carmen_log(path, **kwargs)
-    raise ValueError(f"format must be one of {LOG_FORMATS} or None (detect); got {format!r}")
+    return _read(path, format, detect_log_format, {"cmu": read_cmu_log, "carmen": read_carmen_log}, kwargs)
