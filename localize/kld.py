@@ -33,19 +33,25 @@ from statistics import NormalDist
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._checks import check_count, check_number, check_positive
 from .geometry import as_poses
 
 __all__ = ["KLDSampling", "kld_bound", "bin_keys", "kld_sample_size", "kld_sample_size_loop"]
 
 
 def _check_eps_delta(epsilon: float, delta: float) -> tuple[float, float]:
-    eps = float(epsilon)
-    dl = float(delta)
-    if not (np.isfinite(eps) and eps > 0):
-        raise ValueError(f"epsilon must be a positive KL-divergence bound, e.g. 0.05; got {epsilon!r}")
+    eps = check_positive(epsilon, "epsilon (the KL-divergence bound, e.g. 0.05)")
+    dl = check_number(delta, "delta")
     if not 0.0 < dl < 1.0:
         raise ValueError(f"delta must lie in (0, 1) (probability that the bound fails), e.g. 0.01; got {delta!r}")
     return eps, dl
+
+
+def _check_bin_size(bin_size: ArrayLike) -> NDArray[np.float64]:
+    b = np.asarray(bin_size, dtype=float)
+    if b.shape != (3,) or np.any(~np.isfinite(b)) or np.any(b <= 0):
+        raise ValueError(f"bin_size must be three positive sizes (bx [m], by [m], btheta [rad]); got {bin_size!r}")
+    return b
 
 
 def kld_bound(k: ArrayLike, epsilon: float = 0.05, delta: float = 0.01) -> NDArray[np.float64] | float:
@@ -106,9 +112,7 @@ def bin_keys(poses: ArrayLike, bin_size: ArrayLike) -> NDArray[np.int64]:
     p = as_poses(poses)
     if p.ndim != 2:
         raise ValueError(f"poses must be an (N, 3) array; got shape {p.shape}")
-    b = np.asarray(bin_size, dtype=float)
-    if b.shape != (3,) or np.any(~np.isfinite(b)) or np.any(b <= 0):
-        raise ValueError(f"bin_size must be three positive sizes (bx [m], by [m], btheta [rad]); got {bin_size!r}")
+    b = _check_bin_size(bin_size)
     if p.shape[0] == 0:
         return np.zeros(0, dtype=np.int64)
     idx = np.floor(p / b).astype(np.int64)
@@ -146,9 +150,7 @@ def kld_sample_size(
     >>> kld_sample_size(wide, (0.5, 0.5, 0.2))                         # spread: all of them
     5000
     """
-    n_min = int(n_min)
-    if n_min < 1:
-        raise ValueError(f"n_min must be >= 1; got {n_min}")
+    n_min = check_count(n_min, "n_min")
     keys = bin_keys(poses, bin_size)
     m = keys.size
     if m == 0:
@@ -232,10 +234,7 @@ class KLDSampling:
 
     def __post_init__(self) -> None:
         _check_eps_delta(self.epsilon, self.delta)
-        b = np.asarray(self.bin_size, dtype=float)
-        if b.shape != (3,) or np.any(~np.isfinite(b)) or np.any(b <= 0):
-            raise ValueError(f"bin_size must be three positive sizes (m, m, rad); got {self.bin_size!r}")
-        if int(self.n_min) < 1:
-            raise ValueError(f"n_min must be >= 1; got {self.n_min}")
+        _check_bin_size(self.bin_size)
+        check_count(self.n_min, "n_min")
         if int(self.n_max) < int(self.n_min):
             raise ValueError(f"n_max must be >= n_min = {self.n_min}; got {self.n_max}")
