@@ -79,6 +79,14 @@ Sampler = Callable[[int, np.random.Generator], NDArray[np.float64]]
 
 RESAMPLERS = tuple(_rs.RESAMPLERS)
 
+#: The estimate's cluster histogram has at most this many cells along each side (its cells grow beyond
+#: ``cluster_size`` when the particles spread wider), so that a cloud spread over a large map stays cheap.
+_MAX_CLUSTER_CELLS = 512
+#: Augmented MCL's injection probability below this is rounding noise of two equal averages, not a failure.
+_P_INJECT_NOISE = 1e-9
+#: Eigenvalues of a prior covariance down to ``-_PSD_TOL`` are rounding noise of a singular matrix.
+_PSD_TOL = 1e-12
+
 
 # --------------------------------------------------------------------------- initialisers
 def uniform_particles(grid: OccupancyGrid, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
@@ -122,7 +130,7 @@ def gaussian_particles(
         raise ValueError(f"cov must be a finite (3, 3) covariance or three standard deviations; got shape {c.shape}")
     if not np.allclose(c, c.T):
         raise ValueError("cov must be symmetric")
-    if np.linalg.eigvalsh(c).min() < -1e-12:
+    if np.linalg.eigvalsh(c).min() < -_PSD_TOL:
         raise ValueError("cov must be positive semi-definite")
     p = check_rng(rng).multivariate_normal(m, c, size=check_count(n, "n"), method="eigh")
     p[:, 2] = wrap_angle(p[:, 2])
@@ -293,8 +301,7 @@ def _cluster_labels(xy: NDArray, w: NDArray, size: float, mass: float) -> tuple[
 
     lo = xy.min(axis=0)
     span = xy.max(axis=0) - lo
-    # keep the histogram small: at most ~512 cells along each side
-    size = max(size, float(span.max()) / 512.0)
+    size = max(size, float(span.max()) / _MAX_CLUSTER_CELLS)
     ij = np.floor((xy - lo) / size).astype(np.int64)
     shape = tuple(int(v) + 1 for v in ij.max(axis=0))
     flat = ij[:, 0] * shape[1] + ij[:, 1]
@@ -772,7 +779,7 @@ class MCL:
         st.log_w_slow = _ema_log(st.log_w_slow, lw, a.alpha_slow)
         st.log_w_fast = _ema_log(st.log_w_fast, lw, a.alpha_fast)
         p = float(-np.expm1(st.log_w_fast - st.log_w_slow))
-        st.p_inject = p if p > 1e-9 else 0.0       # ignore rounding noise of equal averages
+        st.p_inject = p if p > _P_INJECT_NOISE else 0.0
 
     def needs_resampling(self) -> bool:
         """The resampling policy: ``N_eff < threshold * N``, or injection is due.

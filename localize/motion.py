@@ -93,6 +93,12 @@ MIN_TRANS = 1e-9
 #: The densities diverge like 1/distance at the previous position (a property
 #: of the model); distances below this (metres) are raised to it.
 _MIN_DIST = 1e-9
+#: Turn rates (rad/s) and turned angles (rad) below this count as straight motion in the readable
+#: velocity model, whose arc formulas divide by them (the limit is the straight line).
+_STRAIGHT = 1e-9
+#: Relative tolerance below which a value that should be nonzero is taken as zero: sin(psi)/psi of
+#: the velocity density's branches, the readable density's "centre at infinity" test.
+_TINY = 1e-12
 #: Angle noise with a standard deviation below this is treated as a plain
 #: Gaussian (the wrapped images add less than 1e-8 of the peak density).
 _WRAP_SIGMA = 0.5
@@ -906,7 +912,7 @@ def velocity_pdf(pose: ArrayLike, u: ArrayLike, prev_pose: ArrayLike, dt: float,
         j = j_star + dj
         psi = psi0 + math.pi * j
         sc = np.sinc(psi / math.pi)                      # sin(psi)/psi
-        ok = np.abs(sc) > 1e-12
+        ok = np.abs(sc) > _TINY
         sc_safe = np.where(ok, sc, 1.0)
         ell = np.where(np.remainder(j, 2.0) == 0, chord, -chord)
         v_hat = ell / sc_safe / dt
@@ -1141,7 +1147,7 @@ def sample_motion_model_velocity(pose: ArrayLike, u: ArrayLike, dt: float, alpha
     v_hat = v + sign * _sample(var_v, z[0])
     w_hat = w + sign * _sample(var_w, z[1])
     g_hat = sign * _sample(var_g, z[2])
-    if abs(w_hat) > 1e-9:
+    if abs(w_hat) > _STRAIGHT:
         r = v_hat / w_hat
         x_new = x - r * math.sin(theta) + r * math.sin(theta + w_hat * dt)
         y_new = y + r * math.cos(theta) - r * math.cos(theta + w_hat * dt)
@@ -1180,7 +1186,7 @@ def motion_model_velocity(pose: ArrayLike, u: ArrayLike, prev_pose: ArrayLike, d
     denom = (y - y2) * math.cos(theta) - (x - x2) * math.sin(theta)
     chord = math.hypot(x2 - x, y2 - y)
     along = (x2 - x) * math.cos(theta) + (y2 - y) * math.sin(theta)
-    if abs(denom) < 1e-12 * max(chord, 1e-300):
+    if abs(denom) < _TINY * max(chord, 1e-300):
         # straight ahead or behind: a circle of infinite radius
         candidates = [(along / dt, 0.0)] + [(math.nan, k * TWO_PI / dt) for k in (-1, 1)]
     else:
@@ -1202,7 +1208,7 @@ def motion_model_velocity(pose: ArrayLike, u: ArrayLike, prev_pose: ArrayLike, d
         phi = w_hat * dt
         gamma_hat = float(wrap_angle(th2 - theta - phi)) / dt
         p = _prob(v - v_hat, var_v) * _prob(w - w_hat, var_w) * _prob_angle(gamma_hat * dt, var_g * dt * dt) * dt
-        if abs(phi) > 1e-9:
+        if abs(phi) > _STRAIGHT:
             shape = (1.0 - math.cos(phi)) / (phi * phi)
         else:
             shape = 0.5

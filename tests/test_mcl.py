@@ -739,3 +739,26 @@ def test_run_filter_state_without_a_scan_fit():
     assert tr.state_summary()["final_state"] == "localized"
     with pytest.raises(ValueError, match="min_share"):
         StateRules(min_share=0.0)
+
+
+def test_update_with_a_non_uniform_prior_is_bayes_rule():
+    # prior N(2, 1) carried by the log-weights of evenly spaced particles, a GPS reading z = 3 with 0.5 m noise:
+    # the posterior is N(2.8, 0.2) (product of Gaussians); the weights are prior x likelihood, normalised
+    class GPS:
+        def log_likelihood(self, poses, z):
+            return -0.5 * ((poses[:, 0] - z) / 0.5) ** 2
+
+    x = np.linspace(-4.0, 8.0, 20_001)
+    particles = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    prior = -0.5 * (x - 2.0) ** 2
+    f = MCL(particles, lambda p, u, rng: p, GPS(), rng=np.random.default_rng(3), log_weights=prior,
+            resample_threshold=0.0)
+    f.update(3.0)
+    expected = np.exp(prior - 0.5 * ((x - 3.0) / 0.5) ** 2)
+    np.testing.assert_allclose(f.weights, expected / expected.sum(), rtol=1e-9, atol=1e-300)
+    e = f.estimate()
+    assert e.mean[0] == pytest.approx(2.8, abs=1e-6) and e.std[0] == pytest.approx(np.sqrt(0.2), abs=1e-6)
+    # resampling keeps that posterior: the mean of N equally weighted copies is within 4 standard errors
+    f.resample()
+    n = f.n
+    assert abs(f.particles[:, 0].mean() - 2.8) < 4 * np.sqrt(0.2 / n) + (x[1] - x[0])

@@ -528,3 +528,25 @@ def test_particle_movers_live_in_motion_and_keep_their_old_names():
         motion.ReversibleOdometry((0.1,) * 4, min_trans=-1.0)
     with pytest.raises(ValueError, match="dt"):
         motion.VelocityMotion((0.1,) * 6, dt=0.0)
+
+
+def test_fast_paths_equal_readable_versions_across_the_block_boundary():
+    # the fast samplers and densities work in cache-sized blocks of _BLOCK poses; the poses on both sides
+    # of a block boundary (and the random numbers they use) must be those of the one-pose-at-a-time oracle
+    from localize.motion import _BLOCK
+
+    m = _BLOCK + 7
+    rng = np.random.default_rng(21)
+    poses = rng.normal(size=(m, 3)) * [3.0, 3.0, 2.0]
+    u = ([0.1, -0.2, 0.3], [0.9, 0.4, -0.5])
+    fast = sample_odometry(poses, u, ALPHAS, np.random.default_rng(5))
+    fast_v = sample_velocity(poses, (0.7, 0.4), 0.5, VALPHAS, np.random.default_rng(6))
+    oracle = np.random.default_rng(5)
+    oracle_v = np.random.default_rng(6)
+    slow = np.array([sample_motion_model_odometry(p, u, ALPHAS, oracle) for p in poses])
+    slow_v = np.array([sample_motion_model_velocity(p, (0.7, 0.4), 0.5, VALPHAS, oracle_v) for p in poses])
+    np.testing.assert_allclose(fast, slow, atol=1e-12)
+    np.testing.assert_allclose(fast_v, slow_v, atol=1e-9)
+    dens = odometry_pdf(fast, u, poses, ALPHAS)
+    for k in (0, _BLOCK - 2, _BLOCK - 1, _BLOCK, _BLOCK + 1, m - 1):
+        assert dens[k] == pytest.approx(motion_model_odometry(fast[k], u, poses[k], ALPHAS), rel=1e-9)

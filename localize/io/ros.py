@@ -52,6 +52,8 @@ __all__ = ["read_ros_map", "write_ros_map", "read_pgm", "write_pgm", "parse_map_
 PathLike = str | os.PathLike
 
 _MODES = ("trinary", "scale", "raw")
+#: The largest grey value of a 16-bit image (PGM maxval, PNG I;16); 8-bit images end at 255.
+_MAX_GREY_16 = 65535
 
 
 # ----------------------------------------------------------------------------- PGM
@@ -100,9 +102,9 @@ def read_pgm(path: PathLike) -> NDArray:
             raise FormatError(p, line, f"PGM header field {len(fields) + 2} must be a positive integer; got {tok[:20]!r}")
         fields.append(int(tok))
     w, h, maxval = fields
-    if w <= 0 or h <= 0 or not 0 < maxval < 65536:
+    if w <= 0 or h <= 0 or not 0 < maxval <= _MAX_GREY_16:
         raise FormatError(p, None, f"PGM header: width {w}, height {h}, maxval {maxval}; need width, height >= 1 and "
-                                   "1 <= maxval <= 65535")
+                                   f"1 <= maxval <= {_MAX_GREY_16}")
     if magic == b"P5":
         pos += 1  # exactly one whitespace byte before the raster
         dtype = np.dtype(">u2") if maxval > 255 else np.dtype(np.uint8)
@@ -243,7 +245,7 @@ def image_to_occupancy(
     img = np.asarray(image)
     if img.ndim not in (2, 3):
         raise ValueError(f"image must be (H, W) or (H, W, C); got shape {img.shape}")
-    full = 65535.0 if img.dtype == np.uint16 else 255.0
+    full = float(_MAX_GREY_16) if img.dtype == np.uint16 else 255.0
     alpha = None
     if img.ndim == 3:
         c = img.shape[2]
@@ -394,7 +396,7 @@ def _read_image(path: Path) -> NDArray:
     if arr.dtype == bool:
         arr = np.where(arr, 255, 0).astype(np.uint8)
     elif arr.dtype not in (np.uint8, np.uint16):
-        if np.issubdtype(arr.dtype, np.integer) and arr.min() >= 0 and arr.max() <= 65535:
+        if np.issubdtype(arr.dtype, np.integer) and arr.min() >= 0 and arr.max() <= _MAX_GREY_16:
             arr = arr.astype(np.uint16)
         else:
             raise FormatError(path, None, f"unsupported image pixel type {arr.dtype} (use 8- or 16-bit grey or RGB)")

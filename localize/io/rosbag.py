@@ -65,6 +65,8 @@ TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 #: The bag formats: ROS 1 ``.bag``; ROS 2 with sqlite3 or MCAP storage.
 BAG_FORMATS = ("rosbag1", "sqlite3", "mcap")
 _GLOBAL_FRAMES = ("map", "world", "earth")
+#: Bag time stamps are integer nanoseconds.
+_NS_PER_S = 1e9
 _TFMESSAGE_MSG = "geometry_msgs/TransformStamped[] transforms\n"
 
 
@@ -261,8 +263,8 @@ def _check_time(root: Path, topic: str, stamps: NDArray[np.int64]) -> None:
     if np.any(d < 0):
         k = int(np.flatnonzero(d < 0)[0]) + 1
         raise FormatError(root, None, f"time goes backwards on {topic}: message {k} has the stamp "
-                                      f"{stamps[k] / 1e9:.9f} s, earlier than message {k - 1} at "
-                                      f"{stamps[k - 1] / 1e9:.9f} s (a restarted clock or a merged bag?); "
+                                      f"{stamps[k] / _NS_PER_S:.9f} s, earlier than message {k - 1} at "
+                                      f"{stamps[k - 1] / _NS_PER_S:.9f} s (a restarted clock or a merged bag?); "
                                       "expected non-decreasing header stamps")
 
 
@@ -501,8 +503,8 @@ def _read(root: Path, reader, scan_topic, odom_topic, laser_pose, odom_frame) ->
     dropped = int((~inside).sum())
     if not np.any(inside):
         raise FormatError(root, None, f"scans without odometry: none of the {stamps.size} scans on {scan_t} "
-                                      f"({stamps[0] / 1e9:.3f} .. {stamps[-1] / 1e9:.3f} s) falls within the "
-                                      f"odometry's time span ({o_st[0] / 1e9:.3f} .. {o_st[-1] / 1e9:.3f} s)")
+                                      f"({stamps[0] / _NS_PER_S:.3f} .. {stamps[-1] / _NS_PER_S:.3f} s) falls within the "
+                                      f"odometry's time span ({o_st[0] / _NS_PER_S:.3f} .. {o_st[-1] / _NS_PER_S:.3f} s)")
     meta["invalid_readings"] = int(bad[inside].sum())  # NaN, inf, outside [range_min, range_max]: no return
     ts = stamps[inside]
     j = np.clip(np.searchsorted(o_st, ts, side="right") - 1, 0, max(o_st.size - 2, 0))
@@ -517,11 +519,11 @@ def _read(root: Path, reader, scan_topic, odom_topic, laser_pose, odom_frame) ->
         odom[:, 2] = wrap_angle(p0[:, 2] + frac * wrap_angle(p1[:, 2] - p0[:, 2]))
         exact0, exact1 = frac == 0, frac == 1
         odom[exact0], odom[exact1] = p0[exact0], p1[exact1]
-        meta["largest_odometry_gap_s"] = round(float(np.max(t1 - t0)) / 1e9, 6)
+        meta["largest_odometry_gap_s"] = round(float(np.max(t1 - t0)) / _NS_PER_S, 6)
     skipped = {"scans outside the odometry's time span": dropped} if dropped else {}
     meta.update({"range_min": mn, "scans_in_bag": int(stamps.size)})
-    return LaserLog(times=ts / 1e9, odometry=odom, ranges=ranges[inside], angles=angles,
-                    max_range=mr, sensor_offset=off, poses=None, odom_times=o_st / 1e9, odom_poses=o_pose,
+    return LaserLog(times=ts / _NS_PER_S, odometry=odom, ranges=ranges[inside], angles=angles,
+                    max_range=mr, sensor_offset=off, poses=None, odom_times=o_st / _NS_PER_S, odom_poses=o_pose,
                     source=str(root), format=fmt, skipped=skipped, meta=meta)
 
 
@@ -637,7 +639,7 @@ def _remove(p: Path) -> None:
 
 
 def _ns(times: NDArray[np.float64]) -> NDArray[np.int64]:
-    return np.round(np.asarray(times, dtype=float) * 1e9).astype(np.int64)
+    return np.round(np.asarray(times, dtype=float) * _NS_PER_S).astype(np.int64)
 
 
 def write_rosbag_log(
@@ -686,7 +688,7 @@ def write_rosbag_log(
         raise ValueError("the log's times go backwards; a bag needs non-decreasing time stamps "
                          "(renumber them, e.g. with a fixed scan period)")
     if t_ns[0] < 0:
-        raise ValueError(f"bag time stamps must not be negative; the first is {t_ns[0] / 1e9} s (use time_offset)")
+        raise ValueError(f"bag time stamps must not be negative; the first is {t_ns[0] / _NS_PER_S} s (use time_offset)")
     f_odom, f_base, f_laser = frames
     inc = float(log.angles[1] - log.angles[0]) if log.n_beams > 1 else 0.0
     if log.n_beams > 2 and not np.allclose(np.diff(log.angles), inc, atol=1e-9):
