@@ -253,11 +253,7 @@ def kidnap_trial(seed, opts, n_steps=50, n=5000):
 
 def recovery_steps(run, trace):
     """Steps after the kidnapping until the error stays below 0.5 m (None: not recovered)."""
-    e = position_error(trace.poses, run.poses)[KIDNAP:]
-    bad = np.flatnonzero(e >= 0.5)
-    if bad.size and bad[-1] == e.size - 1:
-        return None
-    return int(bad[-1]) + 1 if bad.size else 0
+    return metrics.convergence_step(position_error(trace.poses, run.poses)[KIDNAP:], threshold=0.5)
 
 
 traces_k = {}
