@@ -63,7 +63,7 @@ from numpy.typing import ArrayLike, NDArray
 from tqdm import tqdm
 
 from . import __version__
-from ._checks import check_rng
+from ._checks import check_count, check_rng
 from ._output import RunOutput
 from ._resources import check_memory
 from .grid import OccupancyGrid
@@ -392,9 +392,7 @@ def converged_at(values: ArrayLike, threshold: float = 0.5, hold: int = 20) -> i
     True
     """
     v = np.asarray(values, dtype=float).reshape(-1)
-    hold = int(hold)
-    if hold < 1:
-        raise ValueError(f"hold must be >= 1; got {hold}")
+    hold = check_count(hold, "hold")
     ok = v < float(threshold)
     run = 0
     for k in range(v.size - 1, -1, -1):  # run[k] = consecutive oks starting at k

@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import metrics as _metrics_mod
+from ._checks import check_count, check_rng
 from .ekf import EKFLocalizer, UKFLocalizer
 from .geometry import wrap_angle
 from .motion import VelocityMotion
@@ -180,16 +181,13 @@ class Scenario:
             object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=float))
         if self.prior not in ("tracking", "gaussian", "global", "symmetric"):
             raise ValueError(f"prior must be 'tracking', 'gaussian', 'global' or 'symmetric'; got {self.prior!r}")
-        if int(self.n_modes) < 1:
-            raise ValueError(f"n_modes must be >= 1; got {self.n_modes}")
+        check_count(self.n_modes, "n_modes")
         if int(self.n_steps) < FAIL_WINDOW:
             raise ValueError(f"n_steps must be >= {FAIL_WINDOW} (the failure window); got {self.n_steps}")
-        if int(self.n_particles) < 1:
-            raise ValueError(f"n_particles must be >= 1; got {self.n_particles}")
+        check_count(self.n_particles, "n_particles")
         if not self.mcl_inflation >= 1.0:
             raise ValueError(f"mcl_inflation must be >= 1; got {self.mcl_inflation}")
-        if int(self.sense_every) < 1:
-            raise ValueError(f"sense_every must be >= 1; got {self.sense_every}")
+        check_count(self.sense_every, "sense_every")
         if self.kidnap_step is not None and not 0 < self.kidnap_step < self.n_steps:
             raise ValueError(f"kidnap_step must lie in (0, n_steps={self.n_steps}); got {self.kidnap_step}")
 
@@ -283,8 +281,7 @@ def simulate(sc: Scenario, rng: np.random.Generator) -> LandmarkData:
     """
     from . import sim
 
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"rng must be a numpy.random.Generator; got {type(rng).__name__}")
+    check_rng(rng)
     kw = dict(landmarks=sc.landmarks, dt=sc.dt, velocity_alphas=sc.alphas, sigma_range=sc.sigma_range,
               sigma_bearing=sc.sigma_bearing, max_range=sc.max_range)
     n_first = sc.n_steps if sc.kidnap_step is None else sc.kidnap_step
@@ -740,9 +737,7 @@ def rate_tolerance(n: int, rate: float = 0.5, z: float = 3.0) -> float:
     >>> round(rate_tolerance(50, rate=0.0), 3)       # a claimed zero allows one run in 50
     0.02
     """
-    n = int(n)
-    if n < 1:
-        raise ValueError(f"n (the number of seeds) must be >= 1; got {n}")
+    n = check_count(n, "n (the number of seeds)")
     if not 0.0 <= rate <= 1.0:
         raise ValueError(f"rate must lie in [0, 1]; got {rate!r}")
     return float(z * np.sqrt(rate * (1.0 - rate) / n) + 1.0 / n)
@@ -760,9 +755,7 @@ def rates_differ(rate_a: float, rate_b: float, n: int, z: float = 3.0) -> bool:
     >>> rates_differ(0.80, 0.08, 50), rates_differ(0.12, 0.08, 50)
     (True, False)
     """
-    n = int(n)
-    if n < 1:
-        raise ValueError(f"n (the number of seeds) must be >= 1; got {n}")
+    n = check_count(n, "n (the number of seeds)")
     pa, pb = (min(max(p, 1.0 / n), 1.0 - 1.0 / n) for p in (rate_a, rate_b))
     se = np.sqrt(pa * (1 - pa) / n + pb * (1 - pb) / n)
     return bool(rate_a - rate_b > z * se)

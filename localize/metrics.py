@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._checks import check_count
 from .geometry import as_poses, wrap_angle
 
 __all__ = [
@@ -171,9 +172,7 @@ def nees_bounds(dof: int = 3, n_runs: int = 1, confidence: float = 0.95) -> tupl
     """
     from scipy.stats import chi2
 
-    dof, n_runs = int(dof), int(n_runs)
-    if dof < 1 or n_runs < 1:
-        raise ValueError(f"dof and n_runs must be >= 1; got dof={dof}, n_runs={n_runs}")
+    dof, n_runs = check_count(dof, "dof"), check_count(n_runs, "n_runs")
     c = float(confidence)
     if not 0 < c < 1:
         raise ValueError(f"confidence must lie in (0, 1); got {confidence}")

@@ -52,7 +52,7 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._checks import check_count, check_rng
+from ._checks import check_count, check_grid, check_max_range, check_nonnegative, check_positive, check_rng
 from .geometry import as_poses, compose, relative, wrap_angle
 from .grid import OccupancyGrid
 from .io import cmu as _cmu
@@ -330,9 +330,7 @@ def add_clutter(grid: OccupancyGrid, n: int, rng: np.random.Generator, size: tup
     ((3, 4), True)
     """
     rng = check_rng(rng)
-    n = int(n)
-    if n < 0:
-        raise ValueError(f"n must be >= 0; got {n}")
+    n = check_count(n, "n", minimum=0)
     lo, hi = (float(s) for s in size)
     if not 0 < lo <= hi:
         raise ValueError(f"size must be (min, max) with 0 < min <= max metres; got {size}")
@@ -477,9 +475,7 @@ def wander_path(world: OccupancyGrid, n_steps: int, rng: np.random.Generator, st
     ((50, 3), True)
     """
     rng = check_rng(rng)
-    n_steps = int(n_steps)
-    if n_steps < 1:
-        raise ValueError(f"n_steps must be >= 1; got {n_steps}")
+    n_steps = check_count(n_steps, "n_steps")
     speed, dt, radius, max_turn = float(speed), float(dt), float(radius), float(max_turn)
     if not (speed >= 0 and dt > 0 and radius > 0 and max_turn > 0):
         raise ValueError(
@@ -651,14 +647,9 @@ def range_run(
     True
     """
     rng = check_rng(rng)
-    if not isinstance(grid, OccupancyGrid):
-        raise TypeError(f"grid must be an OccupancyGrid; got {type(grid).__name__}")
-    n_steps = int(n_steps)
-    if n_steps < 1:
-        raise ValueError(f"n_steps must be >= 1; got {n_steps}")
-    max_range = float(max_range)
-    if not (np.isfinite(max_range) and max_range > 0):
-        raise ValueError(f"max_range must be a positive number of metres; got {max_range}")
+    check_grid(grid)
+    n_steps = check_count(n_steps, "n_steps")
+    max_range = check_max_range(max_range)
     ang = CMU_ANGLES.copy() if angles is None else np.asarray(angles, dtype=float).reshape(-1)
     if not np.all(np.isfinite(ang)):
         raise ValueError("angles must be finite")
@@ -803,18 +794,13 @@ def landmark_run(
     (2, True)
     """
     rng = check_rng(rng)
-    n_steps = int(n_steps)
-    if n_steps < 1:
-        raise ValueError(f"n_steps must be >= 1; got {n_steps}")
+    n_steps = check_count(n_steps, "n_steps")
     lm = default_landmarks() if landmarks is None else np.asarray(landmarks, dtype=float)
     if lm.ndim != 2 or lm.shape[1] != 2 or not np.all(np.isfinite(lm)):
         raise ValueError(f"landmarks must be a finite (L, 2) array of positions; got shape {lm.shape}")
-    dt = float(dt)
-    if not dt > 0:
-        raise ValueError(f"dt must be > 0 seconds; got {dt}")
+    dt = check_positive(dt, "dt", "seconds")
     for name, v in (("sigma_range", sigma_range), ("sigma_bearing", sigma_bearing), ("max_range", max_range)):
-        if not float(v) >= 0:
-            raise ValueError(f"{name} must be >= 0; got {v}")
+        check_nonnegative(v, name)
     fov = float(fov)
     if not 0 < fov <= 2 * np.pi:
         raise ValueError(f"fov must be in (0, 2*pi] radians; got {fov}")
@@ -1058,17 +1044,14 @@ def corridor_run(
     from .maps import hallway
 
     rng = check_rng(rng)
-    n_steps = int(n_steps)
-    if n_steps < 1:
-        raise ValueError(f"n_steps must be >= 1; got {n_steps}")
+    n_steps = check_count(n_steps, "n_steps")
     d = hallway() if doors is None else np.asarray(doors)
     if d.ndim != 1 or d.size < 2 or not np.all(np.isin(d, (0, 1))):
         raise ValueError(f"doors must be a 1-D array of 0 (wall) and 1 (door) with >= 2 cells; got {d!r}")
     for name, v in (("p_hit", p_hit), ("p_false", p_false)):
         if not 0.0 < float(v) < 1.0:
             raise ValueError(f"{name} must lie in (0, 1); got {v}")
-    if not float(sigma_move) >= 0:
-        raise ValueError(f"sigma_move must be >= 0; got {sigma_move}")
+    check_nonnegative(sigma_move, "sigma_move")
     run0 = CorridorRun(np.zeros(1), np.zeros(1), np.zeros(1, np.int64), d.astype(np.int64), float(sigma_move),
                        float(p_hit), float(p_false))
     length = run0.length

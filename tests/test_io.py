@@ -651,7 +651,7 @@ def test_laserlog_validation_and_helpers():
         ("ranges", [[1, np.nan, 1], [1, 1, 1]], "ranges must be finite"),
         ("odometry", np.zeros((3, 3)), r"odometry must have shape \(2, 3\)"),
         ("times", [], "non-empty"),
-        ("max_range", 0.0, "max_range must be a positive"),
+        ("max_range", 0.0, "max_range must be a finite number of metres > 0"),
         ("angles", [0, 1], r"angles must have shape \(3,\)"),
     ]:
         with pytest.raises(ValueError, match=match):

@@ -14,6 +14,7 @@ from typing import Iterator
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._checks import check_max_range
 from ..geometry import as_poses, compose, inverse, relative
 
 __all__ = ["FormatError", "ParseWarning", "LaserLog", "open_text", "read_lines", "SkipCounter", "time_stamp_problems"]
@@ -289,9 +290,7 @@ class LaserLog:
             raise ValueError(f"angles must have shape ({rng_.shape[1]},) (one per beam); got {ang.shape}")
         if not np.all(np.isfinite(ang)):
             raise ValueError("angles must be finite")
-        mr = float(self.max_range)
-        if not np.isfinite(mr) or mr <= 0:
-            raise ValueError(f"max_range must be a positive number of metres; got {self.max_range!r}")
+        mr = check_max_range(self.max_range)
         off = as_poses(self.sensor_offset, "sensor_offset")
         if off.shape != (3,):
             raise ValueError(f"sensor_offset must be one pose (dx, dy, dtheta); got shape {off.shape}")

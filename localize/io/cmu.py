@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from .._checks import check_grid
 from ..geometry import compose
 from ..grid import OccupancyGrid
 from ._common import (
@@ -223,8 +224,7 @@ def write_cmu_map(path: PathLike, grid: OccupancyGrid, decimals: int = 6) -> Pat
     >>> np.array_equal(read_cmu_map(p).data, g.data, equal_nan=True)
     True
     """
-    if not isinstance(grid, OccupancyGrid):
-        raise TypeError(f"grid must be an OccupancyGrid; got {type(grid).__name__}")
+    check_grid(grid)
     if np.any(np.abs(grid.origin) > 1e-9):
         raise ValueError(f"the CMU map format has no origin: grid.origin must be (0, 0); got {tuple(grid.origin)}")
     res_cm = grid.resolution * 100.0

@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from .._checks import check_grid
 from ..grid import OccupancyGrid
 from ._common import FormatError, ParseWarning
 
@@ -424,8 +425,7 @@ def write_ros_map(
     >>> np.array_equal(back.data, g.data.round(), equal_nan=True), back.origin.tolist()
     (True, [2.0, -1.0])
     """
-    if not isinstance(grid, OccupancyGrid):
-        raise TypeError(f"grid must be an OccupancyGrid; got {type(grid).__name__}")
+    check_grid(grid)
     if not (0.0 <= free_thresh < occupied_thresh <= 1.0):
         raise ValueError("need 0 <= free_thresh < occupied_thresh <= 1")
     yaml_path = Path(path)
