@@ -596,6 +596,7 @@ _positive_int = _number_type(int, "a whole number >= 1", lambda v: v >= 1, "posi
 _positive_float = _number_type(float, "a positive number", lambda v: v > 0, "positive_float")
 _nonneg_float = _number_type(float, "a number >= 0", lambda v: v >= 0, "nonneg_float")
 _seed = _number_type(int, "a whole number >= 0 (a random generator's seed)", lambda v: v >= 0, "seed")
+_nonneg_int = _number_type(int, "a whole number >= 0", lambda v: v >= 0, "nonneg_int")
 _unit_fraction = _number_type(float, "a number in (0, 1]", lambda v: 0 < v <= 1, "unit_fraction")
 _fraction = _number_type(float, "a fraction in [0, 1)", lambda v: 0 <= v < 1, "fraction")
 
@@ -741,7 +742,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="while the state is 'lost', replace the fraction F of the particles by random ones at each "
                         f"resampling, so that the filter searches again (default {DEFAULTS['recovery']:g}). "
                         "Example: --recovery 0")
-    f.add_argument("--restart-after", type=int, default=DEFAULTS["restart_after"], metavar="K",
+    f.add_argument("--restart-after", type=_nonneg_int, default=DEFAULTS["restart_after"], metavar="K",
                    help="start global localization again (all --particles re-drawn over the map) when the cloud "
                         "has agreed on one place but the scans have not fitted the map there for K updates in a "
                         f"row: it is confidently wrong (default {DEFAULTS['restart_after']}; 0 never). "
@@ -793,7 +794,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     dm.add_argument("--out", type=Path, default=Path("localize-demo"), metavar="DIR",
                     help="output folder (default ./localize-demo). Example: --out out/demo")
-    dm.add_argument("--seed", type=int, default=0, metavar="S",
+    dm.add_argument("--seed", type=_seed, default=0, metavar="S",
                     help="seed of the simulation and of the filter (default 0). Example: --seed 3")
     dm.add_argument("--steps", type=_positive_int, default=150, metavar="K",
                     help="number of scans to simulate (default 150). Example: --steps 300")

@@ -253,6 +253,7 @@ def test_a_map_without_free_cells_is_named(files, tmp_path):
 @pytest.mark.parametrize("option, value, message", [
     ("--seed", "-1", "argument --seed: expected a whole number >= 0"),
     ("--seed", "x", "argument --seed: expected a whole number"),
+    ("--restart-after", "-2", "argument --restart-after: expected a whole number >= 0"),
     ("--temper", "2", "argument --temper: expected a number in (0, 1]"),
     ("--temper", "0", "argument --temper: expected a number in (0, 1]"),
     ("--injection", "1", "argument --injection: expected a fraction in [0, 1)"),
