@@ -800,7 +800,7 @@ class MCL:
             return True
         if self.resample_threshold >= 1.0:
             return True
-        return self.n_eff < self.resample_threshold * self.n
+        return _rs.needs_resampling(self.weights, self.resample_threshold)
 
     def resample(self) -> None:
         """Draw a new, equally weighted particle set (always; see :meth:`needs_resampling`).
