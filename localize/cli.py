@@ -873,10 +873,15 @@ def _given_options(args, argv: Sequence[str]) -> set[str]:
 
 
 # ============================================================================ main
-def _relay_warnings(caught, err: TextIO) -> None:
-    """Print warnings caught while reading as ``localize: warning: ...`` lines (no Python warning noise)."""
+def _read_relaying_warnings(err: TextIO, read, *args, **kwargs):
+    """``read(*args, **kwargs)``; the warnings it gives (a reader's skipped records ...) are printed to ``err``
+    as ``localize: warning: ...`` lines (no Python warning noise)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = read(*args, **kwargs)
     for w in caught:
         print(f"localize: warning: {w.message}", file=err)
+    return out
 
 
 def _load(args, err: TextIO):
@@ -895,10 +900,7 @@ def _load(args, err: TextIO):
     else:
         if getattr(args, "scan_topic", None) or getattr(args, "odom_topic", None):
             raise ValueError("--scan-topic and --odom-topic apply to ROS bags only")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            log = lio.read_log(args.log, format=args.log_format)
-        _relay_warnings(caught, err)
+        log = _read_relaying_warnings(err, lio.read_log, args.log, format=args.log_format)
         for msg in lio.time_stamp_problems(log):
             print(f"localize: warning: {msg}; the filter follows the record order", file=err)
         if pose is not None:
@@ -1007,10 +1009,7 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
         fmt = args.map_format or lio.detect_map_format(args.map)
         if kw and fmt != "ros":
             raise ValueError("--not-free-is-occupied applies to ROS map_server maps only")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            grid = lio.read_map(args.map, format=fmt, **kw)
-        _relay_warnings(caught, err)
+        grid = _read_relaying_warnings(err, lio.read_map, args.map, format=fmt, **kw)
         map_desc = str(args.map)
     _check_free_space(grid, map_desc)
     check_memory(args.particles, min(args.beams, log.n_beams), args.sensor, n_cells=grid.data.size)  # before allocating
