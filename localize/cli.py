@@ -601,6 +601,107 @@ _unit_fraction = _number_type(float, "a number in (0, 1]", lambda v: 0 < v <= 1,
 _fraction = _number_type(float, "a fraction in [0, 1)", lambda v: 0 <= v < 1, "fraction")
 
 
+def _shown(value: Any) -> str:
+    """A default as ``--help`` shows it: numbers by ``:g``, the values of a tuple separated by spaces."""
+    if isinstance(value, (tuple, list)):
+        return " ".join(_shown(v) for v in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+@dataclass(frozen=True)
+class FilterOption:
+    """One filter option of ``localize run``: its flag, how its text is read, and its help.
+
+    The default is ``DEFAULTS[dest]`` (``dest`` is the flag as argparse names it, ``--max-range`` ->
+    ``max_range``); ``{default}`` in ``help`` is replaced by it as ``--help`` shows it.
+    """
+
+    flag: str
+    type: Any = None
+    nargs: int | None = None
+    metavar: str | tuple[str, ...] | None = None
+    help: str = ""
+    choices: tuple[str, ...] | None = None
+
+    @property
+    def dest(self) -> str:
+        return self.flag.lstrip("-").replace("-", "_")
+
+    @property
+    def default(self) -> Any:
+        return DEFAULTS[self.dest]
+
+    def add_to(self, parser: Any) -> None:
+        """Add the option to ``parser`` (an argparse parser or argument group)."""
+        kw = {k: v for k, v in (("type", self.type), ("nargs", self.nargs), ("metavar", self.metavar),
+                                ("choices", self.choices)) if v is not None}
+        text = " ".join(self.help.split()).format(default=_shown(self.default))
+        parser.add_argument(self.flag, default=self.default, help=text, **kw)
+
+
+#: The filter options of ``localize run`` whose defaults are :data:`DEFAULTS` (the parser is built from
+#: this table, and ``summary.json``'s settings list them).
+FILTER_OPTIONS: tuple[FilterOption, ...] = (
+    FilterOption("--particles", _positive_int, metavar="N", help="""
+        number of particles at the start (default {default}). With --kld (on by default) this is the initial
+        and largest number: a dense uniform cloud, because in a building of 500-1000 m^2 fewer particles
+        leave most 0.5 m x 0.5 m x 10 degree cells of the pose space empty, and the filter then needs luck
+        to have a particle near the robot. KLD-sampling shrinks the cloud to a few thousand once the filter
+        agrees. Example: --particles 100000"""),
+    FilterOption("--sensor", choices=("likelihood", "beam"), help="""
+        sensor model: 'likelihood' field (fast, robust to small map errors) or the 'beam' model with ray
+        casting (default {default}). Example: --sensor beam"""),
+    FilterOption("--beams", _positive_int, metavar="B", help="""
+        use B evenly spread beams of each scan (default {default}). Example: --beams 180"""),
+    FilterOption("--max-range", _positive_float, metavar="M", help="""
+        sensor model's maximum range in metres; longer readings count as 'no return' (default {default}).
+        Example: --max-range 20"""),
+    FilterOption("--alphas", _nonneg_float, 4, ("A1", "A2", "A3", "A4"), help="""
+        odometry noise alpha1..alpha4 of Probabilistic Robotics table 5.6, as variances (default {default}).
+        Example: --alphas 0.1 0.02 0.05 0.1"""),
+    FilterOption("--sigma-hit", _positive_float, metavar="M", help="""
+        standard deviation of a beam's end point about the nearest wall (likelihood field) or of a reading
+        about the ray-cast range (beam model), metres (default {default}): the map's error sets it, not the
+        laser's (a few cm) -- real maps draw walls 0.1-0.15 m off and furniture moves.
+        Example: --sigma-hit 0.3"""),
+    FilterOption("--temper", _unit_fraction, metavar="T", help="""
+        multiply each scan's log-likelihood by T in (0, 1] (default {default}): neighbouring beams see the
+        same wall, so 30 beams are not 30 independent measurements, and an over-confident filter locks onto
+        a wrong place. Example: --temper 0.1"""),
+    FilterOption("--min-motion", _nonneg_float, 2, ("M", "RAD"), help="""
+        weight the particles only after moving M metres or turning RAD radians since the last update, like
+        ROS AMCL (default {default}; 0 0 updates at every scan). Example: --min-motion 0 0"""),
+    FilterOption("--injection", _fraction, metavar="F", help="""
+        fraction in [0, 1) of random particles injected at each resampling (default {default}). Example:
+        --injection 0.01"""),
+    FilterOption("--min-range", _nonneg_float, metavar="M", help="""
+        readings at or below M metres are not evidence, like ROS AMCL's laser_min_range: lasers report 0 (or
+        a few millimetres) for a failed reading, and nothing closer than the robot's own body is real
+        (default {default}; likelihood field). Example: --min-range 0.1"""),
+    FilterOption("--kld", _nonneg_float, metavar="EPS", help="""
+        KLD-sampling (Fox 2003): after each resampling keep only as many particles as a belief of this
+        spread needs, with KL-divergence bound EPS; --particles is then the initial (and largest) number, so
+        global localization starts with a dense cloud that shrinks once the filter agrees (default
+        {default}; 0 keeps the number fixed). Example: --kld 0.1"""),
+    FilterOption("--min-particles", _positive_int, metavar="N", help="""
+        with --kld, never fewer than N particles (default {default}). Example: --min-particles 2000"""),
+    FilterOption("--augmented", _nonneg_float, 2, ("SLOW", "FAST"), help="""
+        augmented MCL (Probabilistic Robotics table 8.3): inject random particles when the short-term
+        average scan likelihood (rate FAST) drops below the long-term one (rate SLOW); 0 0 switches it off
+        (default {default}). Example: --augmented 0.01 0.2"""),
+    FilterOption("--recovery", _nonneg_float, metavar="F", help="""
+        while the state is 'lost', replace the fraction F of the particles by random ones at each
+        resampling, so that the filter searches again (default {default}). Example: --recovery 0"""),
+    FilterOption("--restart-after", _nonneg_int, metavar="K", help="""
+        start global localization again (all --particles re-drawn over the map) when the cloud has agreed on
+        one place but the scans have not fitted the map there for K updates in a row: it is confidently
+        wrong (default {default}; 0 never). Example: --restart-after 5"""),
+    FilterOption("--min-ess", _nonneg_float, metavar="F", help="""
+        adaptive tempering: no single scan may leave fewer than F*N effective particles, so the first scans
+        cannot collapse the cloud onto a look-alike place (default {default}; 0 off). Example: --min-ess 0.1"""),
+)
+
+
 def _wrap(text: str, width: int = 79) -> str:
     """Wrap a help paragraph (the parsers use RawDescriptionHelpFormatter to keep the examples' layout)."""
     return textwrap.fill(" ".join(text.split()), width=width)
@@ -679,78 +780,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--scans", type=_scan_slice, default=None, metavar="START:STOP[:STEP]",
                    help="use only these scans of the log (Python slice). Example: --scans 0:500 or --scans ::2")
     f = run.add_argument_group("filter")
-    f.add_argument("--particles", type=_positive_int, default=DEFAULTS["particles"], metavar="N",
-                   help="number of particles at the start (default 50000). With --kld (on by default) this is "
-                        "the initial and largest number: a dense uniform cloud, because in a building of "
-                        "500-1000 m^2 fewer particles leave most 0.5 m x 0.5 m x 10 degree cells of the pose "
-                        "space empty, and the filter then needs luck to have a particle near the robot. "
-                        "KLD-sampling shrinks the cloud to a few thousand once the filter agrees. "
-                        "Example: --particles 100000")
     f.add_argument("--seed", type=_seed, default=0, metavar="S",
                    help="seed of the random generator, a whole number >= 0: the same seed gives the same run "
                         "(default 0). "
                         "Example: --seed 7")
-    f.add_argument("--sensor", choices=["likelihood", "beam"], default=DEFAULTS["sensor"],
-                   help="sensor model: 'likelihood' field (fast, robust to small map errors; default) or the "
-                        "'beam' model with ray casting. Example: --sensor beam")
-    f.add_argument("--beams", type=_positive_int, default=DEFAULTS["beams"], metavar="B",
-                   help="use B evenly spread beams of each scan (default 30). Example: --beams 180")
-    f.add_argument("--max-range", type=_positive_float, default=DEFAULTS["max_range"], metavar="M",
-                   help="sensor model's maximum range in metres; longer readings count as 'no return' "
-                        "(default 30). Example: --max-range 20")
-    f.add_argument("--alphas", type=_nonneg_float, nargs=4, default=DEFAULTS["alphas"],
-                   metavar=("A1", "A2", "A3", "A4"),
-                   help="odometry noise alpha1..alpha4 of Probabilistic Robotics table 5.6, as variances "
-                        "(default 0.05 0.01 0.02 0.05). Example: --alphas 0.1 0.02 0.05 0.1")
-    f.add_argument("--sigma-hit", type=_positive_float, default=DEFAULTS["sigma_hit"], metavar="M",
-                   help="standard deviation of a beam's end point about the nearest wall (likelihood field) or "
-                        "of a reading about the ray-cast range (beam model), metres (default "
-                        f"{DEFAULTS['sigma_hit']:g}): the map's error sets it, not the laser's (a few cm) -- real "
-                        "maps draw walls 0.1-0.15 m off and furniture moves. Example: --sigma-hit 0.3")
-    f.add_argument("--temper", type=_unit_fraction, default=DEFAULTS["temper"], metavar="T",
-                   help="multiply each scan's log-likelihood by T in (0, 1] (default "
-                        f"{DEFAULTS['temper']:g}): neighbouring beams see the same wall, so 30 beams are not 30 "
-                        "independent measurements, and an over-confident filter locks onto a wrong place. "
-                        "Example: --temper 0.1")
-    f.add_argument("--min-motion", type=_nonneg_float, nargs=2, default=DEFAULTS["min_motion"], metavar=("M", "RAD"),
-                   help="weight the particles only after moving M metres or turning RAD radians since the last "
-                        "update, like ROS AMCL (default 0.2 0.3; 0 0 updates at every scan). "
-                        "Example: --min-motion 0 0")
-    f.add_argument("--injection", type=_fraction, default=DEFAULTS["injection"], metavar="F",
-                   help="fraction in [0, 1) of random particles injected at each resampling (default 0). "
-                        "Example: --injection 0.01")
-    f.add_argument("--min-range", type=_nonneg_float, default=DEFAULTS["min_range"], metavar="M",
-                   help="readings at or below M metres are not evidence, like ROS AMCL's laser_min_range: lasers "
-                        "report 0 (or a few millimetres) for a failed reading, and nothing closer than the "
-                        f"robot's own body is real (default {DEFAULTS['min_range']:g}; likelihood field). "
-                        "Example: --min-range 0.1")
-    f.add_argument("--kld", type=_nonneg_float, default=DEFAULTS["kld"], metavar="EPS",
-                   help="KLD-sampling (Fox 2003): after each resampling keep only as many particles as a belief "
-                        "of this spread needs, with KL-divergence bound EPS; --particles is then the initial (and "
-                        "largest) number, so global localization starts with a dense cloud that shrinks once the "
-                        f"filter agrees (default {DEFAULTS['kld']:g}; 0 keeps the number fixed). Example: --kld 0.1")
-    f.add_argument("--min-particles", type=_positive_int, default=DEFAULTS["min_particles"], metavar="N",
-                   help=f"with --kld, never fewer than N particles (default {DEFAULTS['min_particles']}). "
-                        "Example: --min-particles 2000")
-    f.add_argument("--augmented", type=_nonneg_float, nargs=2, default=DEFAULTS["augmented"],
-                   metavar=("SLOW", "FAST"),
-                   help="augmented MCL (Probabilistic Robotics table 8.3): inject random particles when the "
-                        "short-term average scan likelihood (rate FAST) drops below the long-term one (rate SLOW); "
-                        "0 0 switches it off (default "
-                        f"{DEFAULTS['augmented'][0]:g} {DEFAULTS['augmented'][1]:g}). Example: --augmented 0.01 0.2")
-    f.add_argument("--recovery", type=_nonneg_float, default=DEFAULTS["recovery"], metavar="F",
-                   help="while the state is 'lost', replace the fraction F of the particles by random ones at each "
-                        f"resampling, so that the filter searches again (default {DEFAULTS['recovery']:g}). "
-                        "Example: --recovery 0")
-    f.add_argument("--restart-after", type=_nonneg_int, default=DEFAULTS["restart_after"], metavar="K",
-                   help="start global localization again (all --particles re-drawn over the map) when the cloud "
-                        "has agreed on one place but the scans have not fitted the map there for K updates in a "
-                        f"row: it is confidently wrong (default {DEFAULTS['restart_after']}; 0 never). "
-                        "Example: --restart-after 5")
-    f.add_argument("--min-ess", type=_nonneg_float, default=DEFAULTS["min_ess"], metavar="F",
-                   help="adaptive tempering: no single scan may leave fewer than F*N effective particles, so the "
-                        "first scans cannot collapse the cloud onto a look-alike place (default "
-                        f"{DEFAULTS['min_ess']:g}; 0 off). Example: --min-ess 0.1")
+    for opt in FILTER_OPTIONS:  # the options whose defaults are DEFAULTS
+        opt.add_to(f)
     f.add_argument("--track", action="store_true",
                    help="pose tracking instead of global localization: start around the log's first reference "
                         "pose (needs a corrected log).")
@@ -1036,12 +1071,8 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
     kld_used, aug_used = kw["kld"], kw["augmented"]
     settings = {
         "map": map_desc, "log": str(args.log), "log_format": log.format, "seed": args.seed,
-        "sensor": args.sensor, "beams": min(args.beams, log.n_beams), "max_range": args.max_range,
-        "alphas": list(args.alphas), "sigma_hit": args.sigma_hit, "temper": args.temper,
-        "min_motion": list(args.min_motion),
-        "injection": args.injection, "init": "reference" if args.track else "global",
-        "min_range": args.min_range, "min_particles": args.min_particles,
-        "recovery": args.recovery, "restart_after": args.restart_after, "min_ess": args.min_ess,
+        **{opt.dest: _jsonable(getattr(args, opt.dest)) for opt in FILTER_OPTIONS},
+        "beams": min(args.beams, log.n_beams), "init": "reference" if args.track else "global",
         "scans": None if args.scans is None else [args.scans.start, args.scans.stop, args.scans.step],
         "laser_pose": [round(float(v), 6) for v in log.sensor_offset],
         "resample_threshold": kw["resample_threshold"],
