@@ -720,6 +720,19 @@ def _scan_slice(s: str) -> slice:
     return slice(*vals)
 
 
+def _add_resolution(parser: Any, what: str) -> None:
+    """``--resolution``: the cell size of the map that ``run --build-map`` and ``map`` build from a log."""
+    parser.add_argument("--resolution", type=_positive_float, default=0.05, metavar="M",
+                        help=f"cell size of {what}, metres (default 0.05). Example: --resolution 0.1")
+
+
+def _add_frames_and_quiet(parser: Any, frames: int) -> None:
+    """``--frames`` and ``--quiet``: the options of ``run`` that ``demo`` passes on to it."""
+    parser.add_argument("--frames", type=_positive_int, default=frames, metavar="K",
+                        help=f"number of animation frames (default {frames}). Example: --frames {2 * frames}")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal.")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``localize`` (``run`` and ``map`` sub-commands)."""
     ap = argparse.ArgumentParser(
@@ -773,8 +786,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--build-map", action="store_true",
                    help="instead of --map, build the map from the log's reference (corrected) poses, as CARMEN "
                         "corrected logs carry them. Example: --build-map --resolution 0.05")
-    g.add_argument("--resolution", type=_positive_float, default=0.05, metavar="M",
-                   help="cell size of a map built with --build-map, metres (default 0.05). Example: --resolution 0.1")
+    _add_resolution(g, "a map built with --build-map")
     g.add_argument("--not-free-is-occupied", action="store_true",
                    help="ROS maps: treat every cell that is not free as an obstacle (maps with grey walls).")
     g.add_argument("--scans", type=_scan_slice, default=None, metavar="START:STOP[:STEP]",
@@ -795,9 +807,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "complete run's results or none (default ./localize-out). Example: --out out/wean")
     o.add_argument("--animate", action="store_true",
                    help="also write DIR/particles.gif (and particles.mp4 when ffmpeg is installed).")
-    o.add_argument("--frames", type=_positive_int, default=100, metavar="K",
-                   help="number of animation frames (default 100). Example: --frames 200")
-    o.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal.")
+    _add_frames_and_quiet(o, frames=100)
 
     mp = sub.add_parser(
         "map", help="build an occupancy grid map from a log with known poses",
@@ -812,8 +822,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="override the log format detected from the content. Example: --log-format carmen")
     mp.add_argument("--out", type=Path, required=True, metavar="FILE.yaml",
                     help="the map's YAML; the PGM is written beside it. Example: --out maps/intel.yaml")
-    mp.add_argument("--resolution", type=_positive_float, default=0.05, metavar="M",
-                    help="cell size in metres (default 0.05). Example: --resolution 0.1")
+    _add_resolution(mp, "the map")
     mp.add_argument("--every", type=_positive_int, default=1, metavar="K",
                     help="use every K-th scan (default 1). Example: --every 4")
     mp.add_argument("--quiet", action="store_true", help="print nothing.")
@@ -835,10 +844,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="number of scans to simulate (default 150). Example: --steps 300")
     dm.add_argument("--particles", type=_positive_int, default=5000, metavar="N",
                     help="number of particles (default 5000). Example: --particles 10000")
-    dm.add_argument("--frames", type=_positive_int, default=60, metavar="K",
-                    help="number of animation frames (default 60). Example: --frames 100")
     dm.add_argument("--no-animate", action="store_true", help="skip the animation (faster).")
-    dm.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal.")
+    _add_frames_and_quiet(dm, frames=60)  # passed on to `localize run`
     run.set_defaults(_option_dests={s: a.dest for a in run._actions for s in a.option_strings})
     return ap
 
