@@ -27,8 +27,10 @@ stopping rule used by :class:`localize.mcl.MCL`, and
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from statistics import NormalDist
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -121,6 +123,18 @@ def bin_keys(poses: ArrayLike, bin_size: ArrayLike) -> NDArray[np.int64]:
     return (idx[:, 0] * span[1] + idx[:, 1]) * span[2] + idx[:, 2]
 
 
+def _rule_inputs(poses: ArrayLike, bin_size: ArrayLike, epsilon: float, delta: float,
+                 n_min: int) -> tuple[NDArray[np.int64], float, float, int]:
+    """The stopping rule's inputs, checked once for both of its versions: the candidates' bin keys (at
+    least one), ``epsilon`` and ``delta`` (see :func:`kld_bound`) and ``n_min``."""
+    epsilon, delta = _check_eps_delta(epsilon, delta)
+    n_min = check_count(n_min, "n_min")
+    keys = bin_keys(poses, bin_size)
+    if keys.size == 0:
+        raise ValueError("poses is empty; need at least one candidate sample")
+    return keys, epsilon, delta, n_min
+
+
 def kld_sample_size(
     poses: ArrayLike,
     bin_size: ArrayLike,
@@ -150,11 +164,8 @@ def kld_sample_size(
     >>> kld_sample_size(wide, (0.5, 0.5, 0.2))                         # spread: all of them
     5000
     """
-    n_min = check_count(n_min, "n_min")
-    keys = bin_keys(poses, bin_size)
+    keys, epsilon, delta, n_min = _rule_inputs(poses, bin_size, epsilon, delta, n_min)
     m = keys.size
-    if m == 0:
-        raise ValueError("poses is empty; need at least one candidate sample")
     _, first = np.unique(keys, return_index=True)
     new_bin = np.zeros(m, dtype=np.int64)
     new_bin[first] = 1
@@ -165,16 +176,15 @@ def kld_sample_size(
     return int(np.argmax(ok)) + 1 if ok.any() else m
 
 
-def kld_sample_size_loop(
-    poses: ArrayLike,
-    bin_size: ArrayLike,
-    epsilon: float = 0.05,
-    delta: float = 0.01,
-    n_min: int = 100,
-) -> int:
+_RULE = inspect.signature(kld_sample_size)  # the arguments and defaults of both versions of the rule
+
+
+def kld_sample_size_loop(poses: ArrayLike, bin_size: ArrayLike, **rule: Any) -> int:
     """The same rule as :func:`kld_sample_size`, written as the loop of PR table 8.4.
 
-    Readable and slow: the test oracle for the vectorised version.
+    Readable and slow: the test oracle for the vectorised version. It takes
+    :func:`kld_sample_size`'s arguments (``epsilon``, ``delta`` and ``n_min``
+    by keyword), with its defaults and its checks.
 
     Examples
     --------
@@ -183,7 +193,9 @@ def kld_sample_size_loop(
     >>> kld_sample_size_loop(p, (0.5, 0.5, 0.2)) == kld_sample_size(p, (0.5, 0.5, 0.2))
     True
     """
-    keys = bin_keys(poses, bin_size)
+    args = _RULE.bind(poses, bin_size, **rule)
+    args.apply_defaults()
+    keys, epsilon, delta, n_min = _rule_inputs(*args.args)
     occupied: set[int] = set()
     k = 0
     n_chi = 0.0

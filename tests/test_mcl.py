@@ -381,6 +381,25 @@ def test_kld_vectorised_equals_loop(seed):
     assert kld_sample_size(p, b, n_min=50) == kld_sample_size_loop(p, b, n_min=50)
 
 
+@pytest.mark.parametrize("bad, error, match", [
+    (dict(poses=np.zeros((0, 3))), ValueError, "empty"),
+    (dict(n_min=0), ValueError, "n_min"),
+    (dict(n_min=2.5), TypeError, "n_min"),
+    (dict(epsilon=0.0), ValueError, "epsilon"),
+    (dict(delta=1.0), ValueError, "delta"),
+    (dict(bin_size=(0.5, 0.5)), ValueError, "bin_size"),
+])
+def test_kld_loop_and_vectorised_reject_the_same_input(bad, error, match):
+    # the oracle checks its input as the fast version does: a single point (one bin, where the loop
+    # never reaches kld_bound) still has its epsilon and delta checked
+    kw = dict(poses=np.zeros((1, 3)), bin_size=(0.5, 0.5, 0.2), epsilon=0.05, delta=0.01, n_min=10)
+    kw.update(bad)
+    for rule in (kld_sample_size, kld_sample_size_loop):
+        with pytest.raises(error, match=match):
+            rule(kw["poses"], kw["bin_size"], epsilon=kw["epsilon"],
+                 delta=kw["delta"], n_min=kw["n_min"])
+
+
 def test_bin_keys_identify_bins():
     rng = np.random.default_rng(2)
     p = rng.uniform(-3, 3, size=(500, 3))
