@@ -81,7 +81,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .geometry import as_poses
+from ._checks import check_angles, check_grid, check_max_range, check_sensor_poses
 from .grid import OccupancyGrid
 
 __all__ = ["cast", "cast_ray", "RayCaster", "METHODS", "CompactTable", "build_table", "build_compact_table",
@@ -92,45 +92,6 @@ _OUTSIDE = ("zero", "raise")
 
 
 # ----------------------------------------------------------------- checking
-def _check_grid(grid: OccupancyGrid) -> OccupancyGrid:
-    if not isinstance(grid, OccupancyGrid):
-        raise TypeError(f"grid must be a localize.OccupancyGrid; got {type(grid).__name__}")
-    return grid
-
-
-def _check_max_range(max_range: float) -> float:
-    try:
-        m = float(max_range)
-    except (TypeError, ValueError):
-        raise TypeError(f"max_range must be a number of metres; got {max_range!r}") from None
-    if not np.isfinite(m) or m <= 0:
-        raise ValueError(f"max_range must be a positive, finite number of metres; got {max_range!r}")
-    return m
-
-
-def _check_angles(angles: ArrayLike) -> NDArray[np.float64]:
-    a = np.asarray(angles, dtype=float)
-    if a.ndim == 0:
-        a = a.reshape(1)
-    if a.ndim != 1:
-        raise ValueError(f"angles must be a 1-D array of beam angles in radians; got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError("angles must be finite (radians relative to the sensor heading); found NaN or inf")
-    if a.size and float(np.max(np.abs(a))) > 2 * np.pi + 1e-9:
-        raise ValueError(f"beam angles must be radians in [-2 pi, 2 pi]; got values up to {float(np.max(np.abs(a))):g}"
-                         " -- degrees? convert with np.radians(angles)")
-    return a
-
-
-def _check_poses(poses: ArrayLike) -> NDArray[np.float64]:
-    p = as_poses(poses, "poses")
-    if p.ndim == 1:
-        p = p[None, :]
-    if p.ndim != 2:
-        raise ValueError(f"poses must be an (N, 3) array of sensor poses; got shape {p.shape}")
-    return p
-
-
 def _inside_or_raise(grid: OccupancyGrid, poses: NDArray, outside: str) -> NDArray[np.bool_]:
     if outside not in _OUTSIDE:
         raise ValueError(f"outside must be one of {_OUTSIDE}; got {outside!r}")
@@ -179,8 +140,8 @@ def cast_ray(grid: OccupancyGrid, x: float, y: float, angle: float, max_range: f
     >>> cast_ray(g, 0.75, 0.25, np.pi / 2, 10.0)   # leaves the map: no return
     10.0
     """
-    grid = _check_grid(grid)
-    max_range = _check_max_range(max_range)
+    grid = check_grid(grid)
+    max_range = check_max_range(max_range)
     res = grid.resolution
     rows, cols = grid.shape
     obstacles = grid.obstacles
@@ -324,8 +285,8 @@ class RayCaster:
 
     def __init__(self, grid: OccupancyGrid, max_range: float, method: str = "lut",
                  n_bins: int | None = None, outside: str = "zero", table_mb: float = 90.0) -> None:
-        self.grid = _check_grid(grid)
-        self.max_range = _check_max_range(max_range)
+        self.grid = check_grid(grid)
+        self.max_range = check_max_range(max_range)
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {method!r}")
         self.method = method
@@ -364,8 +325,8 @@ class RayCaster:
         >>> RayCaster(g, 10.0, method="lut", n_bins=8).cast([[1.5, 0.5, 0.0]], [0.0, np.pi])
         array([[5., 1.]])
         """
-        p = _check_poses(poses)
-        a = _check_angles(angles)
+        p = check_sensor_poses(poses)
+        a = check_angles(angles)
         inside = _inside_or_raise(self.grid, p, self.outside)
         if p.shape[0] == 0 or a.shape[0] == 0:
             return np.zeros((p.shape[0], a.shape[0]), dtype=dtype)
@@ -403,8 +364,8 @@ class RayCaster:
         """
         if self.method != "compact":
             raise ValueError(f"cast_codes needs method='compact'; this caster uses {self.method!r}")
-        p = _check_poses(poses)
-        a = _check_angles(angles)
+        p = check_sensor_poses(poses)
+        a = check_angles(angles)
         inside = _inside_or_raise(self.grid, p, self.outside)
         if p.shape[0] == 0 or a.shape[0] == 0:
             return np.zeros((p.shape[0], a.shape[0]), dtype=np.uint8), self.compact_table.levels
@@ -718,8 +679,8 @@ def build_table(grid: OccupancyGrid, max_range: float, n_bins: int = 360,
     >>> (t[1] * 10.0 / 65535).round(3)    # cell (0, 1): headings 0, 45, 90, ... degrees
     array([ 1.75, 10.  , 10.  , 10.  ,  0.25, 10.  , 10.  , 10.  ])
     """
-    grid = _check_grid(grid)
-    max_range = _check_max_range(max_range)
+    grid = check_grid(grid)
+    max_range = check_max_range(max_range)
     n_bins = int(n_bins)
     if n_bins < 4 or n_bins % 2:
         raise ValueError(f"n_bins must be an even integer >= 4; got {n_bins}")
@@ -807,7 +768,7 @@ def compact_bins(grid: OccupancyGrid, table_mb: float = 90.0) -> int:
     >>> compact_bins(benchmark_map(800, 0.1))   # 609,000 open cells, 86 MB
     140
     """
-    grid = _check_grid(grid)
+    grid = check_grid(grid)
     n_rows = int((~grid.obstacles).sum()) + 1
     room = float(table_mb) * 1e6 - 4 * grid.obstacles.size
     nb = int(room // n_rows) // 2 * 2
@@ -854,8 +815,8 @@ def build_compact_table(grid: OccupancyGrid, max_range: float, n_bins: int = 144
     >>> (t.codes[1] * t.step).round(2)     # cell (0, 1): headings 0, 45, 90, ... degrees
     array([ 1.76, 10.  , 10.  , 10.  ,  0.24, 10.  , 10.  , 10.  ])
     """
-    grid = _check_grid(grid)
-    max_range = _check_max_range(max_range)
+    grid = check_grid(grid)
+    max_range = check_max_range(max_range)
     n_bins = int(n_bins)
     if n_bins < 4 or n_bins % 2:
         raise ValueError(f"n_bins must be an even integer >= 4; got {n_bins}")

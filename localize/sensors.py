@@ -41,26 +41,26 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtr, ndtri
 
+from ._checks import (
+    check_angles,
+    check_grid,
+    check_max_range,
+    check_number,
+    check_positive,
+    check_rng,
+    check_sensor_poses,
+)
 from .geometry import as_poses, wrap_angle
 from .grid import OccupancyGrid
-from .raycast import RayCaster, _check_angles, _check_grid, _check_max_range, coded_sum
+from .raycast import RayCaster, coded_sum
 
-__all__ = ["BeamModel", "LikelihoodField", "LandmarkModel", "check_ranges", "sensor_poses", "select_beams"]
+__all__ = ["BeamModel", "LikelihoodField", "LandmarkModel", "range_bearing", "range_bearing_jacobian", "ON_LANDMARK",
+           "check_ranges", "sensor_poses", "select_beams"]
 
 _SQRT2PI = math.sqrt(2.0 * math.pi)
 
 
 # ------------------------------------------------------------------ helpers
-def _positive(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number; got {value!r}") from None
-    if not np.isfinite(v) or v <= 0:
-        raise ValueError(f"{name} must be positive and finite; got {value!r}")
-    return v
-
-
 def _weights(names: tuple[str, ...], values: tuple[float, ...], tol: float = 1e-6) -> NDArray[np.float64]:
     w = np.array([float(v) for v in values])
     for n, v in zip(names, w):
@@ -94,11 +94,7 @@ def sensor_poses(poses: ArrayLike, sensor_offset: ArrayLike = (0.0, 0.0, 0.0)) -
     >>> sensor_poses([[1.0, 2.0, np.pi / 2]], (0.25, 0.0, 0.0)).round(6)
     array([[1.      , 2.25    , 1.570796]])
     """
-    p = as_poses(poses, "poses")
-    if p.ndim == 1:
-        p = p[None, :]
-    if p.ndim != 2:
-        raise ValueError(f"poses must be an (N, 3) array of robot poses; got shape {p.shape}")
+    p = check_sensor_poses(poses)
     o = _offset(sensor_offset)
     if not o.any():
         return p
@@ -160,14 +156,8 @@ def select_beams(n_beams: int, max_beams: int | None) -> NDArray[np.intp]:
     return np.round(np.linspace(0, n - 1, m)).astype(np.intp)
 
 
-def _check_rng(rng) -> np.random.Generator:
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
-    return rng
-
-
 def _check_temper(temper: float) -> float:
-    t = float(temper)
+    t = check_number(temper, "temper")
     if not 0.0 < t <= 1.0:
         raise ValueError(f"temper must lie in (0, 1] (1 = plain product of beams); got {temper!r}")
     return t
@@ -240,12 +230,12 @@ class BeamModel:
                  *, sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
                  temper: float = 1.0, method: str = "lut", n_bins: int | None = None,
                  caster: RayCaster | None = None) -> None:
-        self.grid = None if grid is None else _check_grid(grid)
-        self.max_range = _check_max_range(max_range)
+        self.grid = None if grid is None else check_grid(grid)
+        self.max_range = check_max_range(max_range)
         w = _weights(("z_hit", "z_short", "z_max", "z_rand"), (z_hit, z_short, z_max, z_rand))
         self.z_hit, self.z_short, self.z_max, self.z_rand = (float(v) for v in w)
-        self.sigma_hit = _positive("sigma_hit", sigma_hit)
-        self.lambda_short = _positive("lambda_short", lambda_short)
+        self.sigma_hit = check_positive(sigma_hit, "sigma_hit", "metres")
+        self.lambda_short = check_positive(lambda_short, "lambda_short")
         self.sensor_offset = _offset(sensor_offset)
         if max_beams is not None and int(max_beams) < 1:
             raise ValueError(f"max_beams must be >= 1 or None; got {max_beams}")
@@ -374,7 +364,7 @@ class BeamModel:
 
     # ---------------------------------------------------------------- scans
     def _prepare(self, ranges: ArrayLike, angles: ArrayLike):
-        a = _check_angles(angles)
+        a = check_angles(angles)
         z = check_ranges(ranges, self.max_range)
         if z.ndim != 1 or z.shape != a.shape:
             raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
@@ -471,7 +461,7 @@ class BeamModel:
         >>> round(float(np.mean(z == 10.0)), 2), bool(z.min() >= 0)
         (0.05, True)
         """
-        rng = _check_rng(rng)
+        rng = check_rng(rng)
         zs = np.clip(np.asarray(expected, dtype=float), self.z_floor, self.max_range)
         zmax, sig, lam = self.max_range, self.sigma_hit, self.lambda_short
         k = rng.choice(4, size=zs.shape, p=[self.z_hit, self.z_short, self.z_max, self.z_rand])
@@ -494,7 +484,7 @@ class BeamModel:
         >>> z.shape, bool(np.all((0 <= z) & (z <= 8.0)))
         ((1, 5), True)
         """
-        rng = _check_rng(rng)
+        rng = check_rng(rng)
         return self.sample_expected(self.expected(poses, angles), rng)
 
 
@@ -569,21 +559,21 @@ class LikelihoodField:
                  temper: float = 1.0, min_range: float = 0.0, unknown_is_obstacle: bool | None = None,
                  unknown_neutral: bool = True) -> None:
         self.unknown_neutral = bool(unknown_neutral)
-        grid = _check_grid(grid)
+        grid = check_grid(grid)
         if unknown_is_obstacle is not None and bool(unknown_is_obstacle) != grid.unknown_is_obstacle:
             grid = OccupancyGrid(grid.data, grid.resolution, origin=grid.origin,
                                  occupied_threshold=grid.occupied_threshold,
                                  unknown_is_obstacle=bool(unknown_is_obstacle))
         self.grid = grid
-        self.max_range = _check_max_range(max_range)
+        self.max_range = check_max_range(max_range)
         mn = float(min_range)
         if not (np.isfinite(mn) and 0.0 <= mn < self.max_range):
             raise ValueError(f"min_range must lie in [0, max_range = {self.max_range:g}) metres; got {min_range!r}")
         self.min_range = mn
         w = _weights(("z_hit", "z_rand"), (z_hit, z_rand))
         self.z_hit, self.z_rand = float(w[0]), float(w[1])
-        self.sigma_hit = _positive("sigma_hit", sigma_hit)
-        self.max_dist = 4.0 * self.sigma_hit if max_dist is None else _positive("max_dist", max_dist)
+        self.sigma_hit = check_positive(sigma_hit, "sigma_hit", "metres")
+        self.max_dist = 4.0 * self.sigma_hit if max_dist is None else check_positive(max_dist, "max_dist", "metres")
         self.sensor_offset = _offset(sensor_offset)
         if max_beams is not None and int(max_beams) < 1:
             raise ValueError(f"max_beams must be >= 1 or None; got {max_beams}")
@@ -682,7 +672,7 @@ class LikelihoodField:
         return out
 
     def _prepare(self, ranges: ArrayLike, angles: ArrayLike):
-        a = _check_angles(angles)
+        a = check_angles(angles)
         z = check_ranges(ranges, self.max_range)
         if z.ndim != 1 or z.shape != a.shape:
             raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
@@ -756,8 +746,8 @@ class LikelihoodField:
         >>> lf.sample([[6.0, 5.5, 0.0]], np.linspace(-1, 1, 4), np.random.default_rng(0)).shape
         (1, 4)
         """
-        rng = _check_rng(rng)
-        a = _check_angles(angles)
+        rng = check_rng(rng)
+        a = check_angles(angles)
         zs = RayCaster(self.grid, self.max_range, method=method).cast(sensor_poses(poses, self.sensor_offset), a)
         z = zs + rng.normal(0.0, self.sigma_hit, zs.shape)
         rand = rng.random(zs.shape) < self.z_rand
@@ -767,6 +757,60 @@ class LikelihoodField:
 
 
 # ----------------------------------------------------------- landmark model
+#: A robot nearer than this (metres) to a landmark stands on it: the bearing,
+#: and so the measurement Jacobian, is undefined there (the EKF skips such a
+#: sighting; :meth:`LandmarkModel.jacobian` raises).
+ON_LANDMARK = 1e-9
+
+
+def range_bearing(poses: ArrayLike, landmarks: ArrayLike) -> NDArray[np.float64]:
+    """The landmark model's noise-free measurement ``h(x, m)``: ``(range, bearing)`` (PR eq. 6.40).
+
+    ``poses (..., 3)`` and ``landmarks (..., 2)`` broadcast against each
+    other; the result has shape ``(..., 2)``, bearings relative to the
+    heading in ``[-pi, pi)``. Unchecked (the inner loop of the EKF and the UKF);
+    :meth:`LandmarkModel.expected` and :func:`localize.ekf.landmark_measurement`
+    check their input and call it.
+
+    Examples
+    --------
+    >>> range_bearing([0.0, 0.0, np.pi / 2], [3.0, 4.0]).round(6)
+    array([ 5.      , -0.643501])
+    """
+    p, m = np.asarray(poses, dtype=float), np.asarray(landmarks, dtype=float)
+    dx, dy = m[..., 0] - p[..., 0], m[..., 1] - p[..., 1]
+    b = wrap_angle(np.arctan2(dy, dx) - p[..., 2])
+    return np.stack(np.broadcast_arrays(np.hypot(dx, dy), b), axis=-1)
+
+
+def range_bearing_jacobian(poses: ArrayLike, landmarks: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Jacobian ``H = dh/dx`` of :func:`range_bearing` and where it is undefined (PR eq. 7.14).
+
+    ``H = [[-dx/r, -dy/r, 0], [dy/q, -dx/q, -1]]`` with ``(dx, dy)`` from the
+    robot to the landmark and ``q = r**2``; shape ``(..., 2, 3)``. The second
+    result is ``True`` where the robot stands on the landmark (``r <``
+    :data:`ON_LANDMARK`); ``H`` is finite there but meaningless. Unchecked.
+
+    Examples
+    --------
+    >>> H, on = range_bearing_jacobian([0.0, 0.0, 0.0], [[3.0, 4.0], [0.0, 0.0]])
+    >>> H[0].round(4), on.tolist()
+    (array([[-0.6 , -0.8 ,  0.  ],
+           [ 0.16, -0.12, -1.  ]]), [False, True])
+    """
+    p, m = np.asarray(poses, dtype=float), np.asarray(landmarks, dtype=float)
+    dx, dy = m[..., 0] - p[..., 0], m[..., 1] - p[..., 1]
+    q = dx * dx + dy * dy
+    on = q < ON_LANDMARK ** 2
+    q = np.where(on, 1.0, q)
+    r = np.sqrt(q)
+    H = np.zeros(np.shape(q) + (2, 3))
+    H[..., 0, 0], H[..., 0, 1] = -dx / r, -dy / r
+    H[..., 1, 0], H[..., 1, 1], H[..., 1, 2] = dy / q, -dx / q, -1.0
+    return H, on
+
+
+
 class LandmarkModel:
     """Range and bearing to identified point landmarks (PR section 6.6, table 6.4).
 
@@ -804,8 +848,8 @@ class LandmarkModel:
             raise ValueError("landmarks must be finite")
         lm.setflags(write=False)
         self.landmarks = lm
-        self.sigma_range = _positive("sigma_range", sigma_range)
-        self.sigma_bearing = _positive("sigma_bearing", sigma_bearing)
+        self.sigma_range = check_positive(sigma_range, "sigma_range", "metres")
+        self.sigma_bearing = check_positive(sigma_bearing, "sigma_bearing", "radians")
 
     def __repr__(self) -> str:
         return (f"LandmarkModel({len(self.landmarks)} landmarks, sigma_range={self.sigma_range:g}, "
@@ -838,15 +882,8 @@ class LandmarkModel:
         >>> LandmarkModel([[1.0, 1.0]], 0.1, 0.1).expected([0.0, 0.0, np.pi / 2]).round(4)
         array([[[ 1.4142, -0.7854]]])
         """
-        p = as_poses(poses, "poses")
-        if p.ndim == 1:
-            p = p[None, :]
-        m = self.landmarks[self._ids(ids)]
-        dx = m[None, :, 0] - p[:, None, 0]
-        dy = m[None, :, 1] - p[:, None, 1]
-        r = np.hypot(dx, dy)
-        b = wrap_angle(np.arctan2(dy, dx) - p[:, None, 2])
-        return np.stack([r, np.asarray(b).reshape(r.shape)], axis=-1)
+        p = check_sensor_poses(poses)
+        return range_bearing(p[:, None, :], self.landmarks[self._ids(ids)][None])
 
     def log_likelihood(self, poses: ArrayLike, z: ArrayLike, ids: ArrayLike) -> NDArray[np.float64]:
         """Log-likelihood ``(N,)`` of sightings ``z`` ``(K, 2)`` of landmarks ``ids`` ``(K,)``.
@@ -869,9 +906,7 @@ class LandmarkModel:
             raise ValueError("z must be finite (range, bearing) pairs")
         if (zz[:, 0] < 0).any():
             raise ValueError("measured ranges in z must be >= 0")
-        p = as_poses(poses, "poses")
-        if p.ndim == 1:
-            p = p[None, :]
+        p = check_sensor_poses(poses)
         if k.size == 0:
             return np.zeros(p.shape[0])
         e = self.expected(p, k)
@@ -889,7 +924,7 @@ class LandmarkModel:
         >>> lm.sample([0.0, 0.0, 0.0], np.random.default_rng(0)).shape
         (2, 2)
         """
-        rng = _check_rng(rng)
+        rng = check_rng(rng)
         p = as_poses(pose, "pose").reshape(-1, 3)
         if p.shape[0] != 1:
             raise ValueError(f"pose must be a single (x, y, theta); got shape {np.shape(pose)}")
@@ -905,7 +940,7 @@ class LandmarkModel:
 
         ``H = [[-dx/r, -dy/r, 0], [dy/r^2, -dx/r^2, -1]]`` with
         ``(dx, dy)`` from the robot to the landmark. Raises ``ValueError``
-        when the robot sits on the landmark (``r = 0``).
+        when the robot stands on the landmark (``r <`` :data:`ON_LANDMARK`).
 
         Examples
         --------
@@ -918,9 +953,8 @@ class LandmarkModel:
         if p.shape != (3,):
             raise ValueError(f"pose must be a single (x, y, theta); got shape {np.shape(pose)}")
         k = int(self._ids([int(landmark_id)])[0])
-        dx, dy = self.landmarks[k] - p[:2]
-        q = dx * dx + dy * dy
-        if q == 0:
-            raise ValueError(f"the pose coincides with landmark {k}: the bearing is undefined")
-        r = math.sqrt(q)
-        return np.array([[-dx / r, -dy / r, 0.0], [dy / q, -dx / q, -1.0]])
+        H, on = range_bearing_jacobian(p, self.landmarks[k])
+        if on:
+            raise ValueError(f"pose {p.tolist()} coincides with landmark {k} at {self.landmarks[k].tolist()} "
+                             f"(nearer than ON_LANDMARK = {ON_LANDMARK:g} m): the bearing is undefined")
+        return H
