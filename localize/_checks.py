@@ -43,6 +43,8 @@ from .geometry import as_poses
 __all__ = ["PoseShapeWarning", "check_poses", "check_rng", "check_number", "check_positive", "check_nonnegative",
            "check_probability", "check_count", "check_max_range", "check_angles", "check_grid", "check_sensor_poses"]
 
+#: Radians of round-off allowed beyond 2 pi before beam angles are taken for degrees.
+ANGLE_SLACK = 1e-9
 #: What every rng error suggests.
 RNG_HINT = "np.random.default_rng(seed)"
 
@@ -153,7 +155,7 @@ def check_angles(angles: ArrayLike, name: str = "angles") -> NDArray[np.float64]
         raise ValueError(f"{name} must be a 1-D array of beam angles in radians; got shape {a.shape}")
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name} must be finite (radians relative to the sensor heading); found NaN or inf")
-    if a.size and float(np.max(np.abs(a))) > 2 * np.pi + 1e-9:
+    if a.size and float(np.max(np.abs(a))) > 2 * np.pi + ANGLE_SLACK:
         raise ValueError(f"{name}: beam angles must be radians in [-2 pi, 2 pi]; got values up to "
                          f"{float(np.max(np.abs(a))):g} -- degrees? convert with np.radians({name})")
     return a

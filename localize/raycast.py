@@ -85,10 +85,21 @@ from ._checks import check_angles, check_grid, check_max_range, check_sensor_pos
 from .grid import OccupancyGrid
 
 __all__ = ["cast", "cast_ray", "RayCaster", "METHODS", "CompactTable", "build_table", "build_compact_table",
-           "compact_bins", "coded_sum"]
+           "compact_bins", "coded_sum", "LUT_MAX_CODE", "COMPACT_MAX_CODE"]
 
 METHODS = ("exact", "march", "lut", "compact")
 _OUTSIDE = ("zero", "raise")
+#: The "lut" table's uint16 code for ``max_range`` (the largest uint16): ``max_range / 65535`` metres per unit.
+LUT_MAX_CODE = 65535
+#: The compact table's uint8 code for ``max_range`` (the largest uint8): ``max_range / 255`` metres per unit.
+COMPACT_MAX_CODE = 255
+#: Rows of the compact table transposed at a time: a tile of 16384 x n_bins bytes stays in the CPU's cache.
+_TRANSPOSE_TILE = 16384
+#: The ray marcher's iteration cap: 4 steps per cell of max_range, plus 100 (the geometry never needs it;
+#: rays still running then are finished by the exact cell walk).
+_MARCH_STEPS_PER_CELL, _MARCH_EXTRA_STEPS = 4, 100
+#: Heading-bin coordinates are kept this far (in bins) below ``n_bins`` so that a float32 sum wraps once.
+_BIN_MARGIN = 1e-3
 
 
 # ----------------------------------------------------------------- checking
@@ -493,7 +504,7 @@ class RayCaster:
         fbuf = np.empty(m, np.uint8)
         kbuf = np.empty(m, f32 if hp * wp < 2**24 else np.float64)
         ibuf = np.empty(m, np.int32 if hp * wp < 2**31 else np.int64)
-        cap = int(4 * limit) + 100
+        cap = int(_MARCH_STEPS_PER_CELL * limit) + _MARCH_EXTRA_STEPS
         fallback = ray[:0]
         for _ in range(cap):
             size = ray.size
@@ -592,7 +603,7 @@ class RayCaster:
     @property
     def lut_scale(self) -> float:
         """Metres per unit of the table's uint16 code."""
-        return self.max_range / 65535.0
+        return self.max_range / LUT_MAX_CODE
 
     def _lut_cast(self, p: NDArray, a: NDArray, inside: NDArray) -> NDArray:
         grid = self.grid
@@ -653,7 +664,7 @@ def _wrap_bins(x: NDArray[np.float64], nb: int) -> NDArray[np.float32]:
     """Bin coordinates in [0, nb + 1) as float32 in [0, nb - 1e-3]."""
     y = x.astype(np.float32)
     y[y >= nb] -= np.float32(nb)
-    return np.minimum(y, np.float32(nb - 1e-3))
+    return np.minimum(y, np.float32(nb - _BIN_MARGIN))
 
 
 def build_table(grid: OccupancyGrid, max_range: float, n_bins: int = 360,
@@ -679,6 +690,21 @@ def build_table(grid: OccupancyGrid, max_range: float, n_bins: int = 360,
     >>> (t[1] * 10.0 / 65535).round(3)    # cell (0, 1): headings 0, 45, 90, ... degrees
     array([ 1.75, 10.  , 10.  , 10.  ,  0.25, 10.  , 10.  , 10.  ])
     """
+    grid, max_range, n_bins, line_density = _check_table(grid, max_range, n_bins, line_density)
+    rows, cols = grid.shape
+    scale = max_range / LUT_MAX_CODE
+    to_code = np.float32(1.0 / scale)
+    table = np.empty((rows * cols, n_bins), dtype=np.uint16)
+    for k, transposed, fwd, bwd in _bin_sweeps(grid, max_range, n_bins, line_density):
+        if transposed:
+            fwd, bwd = fwd.T, bwd.T
+        table[:, k] = np.rint(fwd.ravel() * to_code).astype(np.uint16)
+        table[:, k + n_bins // 2] = np.rint(bwd.ravel() * to_code).astype(np.uint16)
+    return table
+
+
+def _check_table(grid, max_range, n_bins, line_density) -> tuple[OccupancyGrid, float, int, int]:
+    """The checked arguments of :func:`build_table` and :func:`build_compact_table`."""
     grid = check_grid(grid)
     max_range = check_max_range(max_range)
     n_bins = int(n_bins)
@@ -687,11 +713,18 @@ def build_table(grid: OccupancyGrid, max_range: float, n_bins: int = 360,
     line_density = int(line_density)
     if not 1 <= line_density <= 16:
         raise ValueError(f"line_density must be an integer in 1..16; got {line_density}")
+    return grid, max_range, n_bins, line_density
+
+
+def _bin_sweeps(grid: OccupancyGrid, max_range: float, n_bins: int, line_density: int):
+    """The sweeps of both lookup tables: for each pair of opposite heading bins ``k`` and ``k + n_bins / 2``.
+
+    Yields ``(k, transposed, fwd, bwd)``: the ranges at heading ``k`` and at
+    the opposite heading, as ``(W, H)`` arrays when ``transposed`` is false
+    (the sweep ran along the columns: the heading is nearer the x axis) and
+    ``(H, W)`` arrays when it is true.
+    """
     obst = grid.obstacles
-    rows, cols = obst.shape
-    res = grid.resolution
-    scale = max_range / 65535.0
-    table = np.empty((rows * cols, n_bins), dtype=np.uint16)
     sweeps = {False: _Sweep(obst), True: _Sweep(obst.T)}
     for k in range(n_bins // 2):
         phi = 2.0 * np.pi * k / n_bins
@@ -700,14 +733,10 @@ def build_table(grid: OccupancyGrid, max_range: float, n_bins: int = 360,
             transposed, slope, forward_positive = False, s / c, c > 0
         else:
             transposed, slope, forward_positive = True, c / s, s > 0
-        fwd, bwd = sweeps[transposed].ranges(slope, res, max_range, line_density)
-        if transposed:
-            fwd, bwd = fwd.T, bwd.T
+        fwd, bwd = sweeps[transposed].ranges(slope, grid.resolution, max_range, line_density)
         if not forward_positive:
             fwd, bwd = bwd, fwd
-        table[:, k] = np.rint(fwd.ravel() * np.float32(1.0 / scale)).astype(np.uint16)
-        table[:, k + n_bins // 2] = np.rint(bwd.ravel() * np.float32(1.0 / scale)).astype(np.uint16)
-    return table
+        yield k, transposed, fwd, bwd
 
 
 @dataclass(frozen=True)
@@ -735,13 +764,13 @@ class CompactTable:
     @property
     def step(self) -> float:
         """Metres per code unit, ``max_range / 255``."""
-        return self.max_range / 255.0
+        return self.max_range / COMPACT_MAX_CODE
 
     @property
     def levels(self) -> NDArray[np.float32]:
         """The range of every code, ``(256,)`` float32 (codes above 255 do not occur)."""
-        levels = (np.arange(256) * self.step).astype(np.float32)
-        levels[255] = self.max_range  # exactly, not a rounding above it
+        levels = (np.arange(COMPACT_MAX_CODE + 1) * self.step).astype(np.float32)
+        levels[COMPACT_MAX_CODE] = self.max_range  # exactly, not a rounding above it
         return levels
 
     @property
@@ -815,43 +844,25 @@ def build_compact_table(grid: OccupancyGrid, max_range: float, n_bins: int = 144
     >>> (t.codes[1] * t.step).round(2)     # cell (0, 1): headings 0, 45, 90, ... degrees
     array([ 1.76, 10.  , 10.  , 10.  ,  0.24, 10.  , 10.  , 10.  ])
     """
-    grid = check_grid(grid)
-    max_range = check_max_range(max_range)
-    n_bins = int(n_bins)
-    if n_bins < 4 or n_bins % 2:
-        raise ValueError(f"n_bins must be an even integer >= 4; got {n_bins}")
-    line_density = int(line_density)
-    if not 1 <= line_density <= 16:
-        raise ValueError(f"line_density must be an integer in 1..16; got {line_density}")
+    grid, max_range, n_bins, line_density = _check_table(grid, max_range, n_bins, line_density)
     obst = grid.obstacles
     rows, cols = obst.shape
-    res = grid.resolution
     open_i, open_j = np.nonzero(~obst)
     row_of_cell = np.zeros(rows * cols, dtype=np.int32)
     row_of_cell[open_i * cols + open_j] = np.arange(1, open_i.size + 1, dtype=np.int32)
     # where each open cell's value sits in the sweeps' (column, row) and (row, column) layouts
     where = {False: (open_j * rows + open_i).astype(np.intp), True: (open_i * cols + open_j).astype(np.intp)}
     by_bin = np.zeros((n_bins, open_i.size + 1), dtype=np.uint8)
-    to_code = np.float32(255.0 / max_range)
-    sweeps = {False: _Sweep(obst), True: _Sweep(obst.T)}
-    for k in range(n_bins // 2):
-        phi = 2.0 * np.pi * k / n_bins
-        c, s = math.cos(phi), math.sin(phi)
-        if abs(c) >= abs(s):
-            transposed, slope, forward_positive = False, s / c, c > 0
-        else:
-            transposed, slope, forward_positive = True, c / s, s > 0
-        fwd, bwd = sweeps[transposed].ranges(slope, res, max_range, line_density)
-        if not forward_positive:
-            fwd, bwd = bwd, fwd
+    to_code = np.float32(COMPACT_MAX_CODE / max_range)
+    for k, transposed, fwd, bwd in _bin_sweeps(grid, max_range, n_bins, line_density):
         for kk, r in ((k, fwd), (k + n_bins // 2, bwd)):
             v = r.T.ravel().take(where[transposed])  # r.T is the sweep's contiguous array
             v *= to_code
             v += np.float32(0.5)
             by_bin[kk, 1:] = v.astype(np.uint8)
     codes = np.empty((open_i.size + 1, n_bins), dtype=np.uint8)
-    for c0 in range(0, codes.shape[0], 16384):  # transpose in tiles that stay in cache
-        codes[c0:c0 + 16384] = by_bin[:, c0:c0 + 16384].T
+    for c0 in range(0, codes.shape[0], _TRANSPOSE_TILE):  # transpose in tiles that stay in cache
+        codes[c0:c0 + _TRANSPOSE_TILE] = by_bin[:, c0:c0 + _TRANSPOSE_TILE].T
     return CompactTable(codes, row_of_cell, n_bins, max_range)
 
 

@@ -58,6 +58,9 @@ __all__ = ["BeamModel", "LikelihoodField", "LandmarkModel", "range_bearing", "ra
            "check_ranges", "sensor_poses", "select_beams"]
 
 _SQRT2PI = math.sqrt(2.0 * math.pi)
+#: Farther than this many sigma_hit from 0 and from max_range, the truncated hit
+#: Gaussian's normaliser eta is 1 to double precision (1 - ndtr(8) < 1e-15).
+_ETA_SIGMAS = 8
 
 
 # ------------------------------------------------------------------ helpers
@@ -326,14 +329,14 @@ class BeamModel:
         zs = np.maximum(zs.astype(dt, copy=False), dt(self.z_floor))
         z = np.asarray(z, dtype=dt)
         sig, lam, zmax = self.sigma_hit, self.lambda_short, self.max_range
-        # hit: Gaussian; its truncation mass eta differs from 1 only within 8 sigma of 0 or max_range
+        # hit: Gaussian; its truncation mass eta differs from 1 only within _ETA_SIGMAS sigma of 0 or max_range
         d = z - zs
         d *= dt(1.0 / sig)
         d *= d
         d *= dt(-0.5)
         g = np.exp(d)
         g *= dt(self.z_hit / (sig * _SQRT2PI))
-        edge = (zs < 8 * sig) | (zs > zmax - 8 * sig)
+        edge = (zs < _ETA_SIGMAS * sig) | (zs > zmax - _ETA_SIGMAS * sig)
         if edge.any():
             ze = zs[edge].astype(float)
             eta = ndtr((zmax - ze) / sig) - ndtr(-ze / sig)
