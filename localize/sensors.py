@@ -159,6 +159,17 @@ def select_beams(n_beams: int, max_beams: int | None) -> NDArray[np.intp]:
     return np.round(np.linspace(0, n - 1, m)).astype(np.intp)
 
 
+def _scan_beams(ranges: ArrayLike, angles: ArrayLike, max_range: float,
+                max_beams: int | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A scan's checked readings and angles, thinned to ``max_beams`` (:func:`select_beams`)."""
+    a = check_angles(angles)
+    z = check_ranges(ranges, max_range)
+    if z.ndim != 1 or z.shape != a.shape:
+        raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
+    sel = select_beams(a.size, max_beams)
+    return z[sel], a[sel]
+
+
 def _check_temper(temper: float) -> float:
     t = check_number(temper, "temper")
     if not 0.0 < t <= 1.0:
@@ -367,12 +378,7 @@ class BeamModel:
 
     # ---------------------------------------------------------------- scans
     def _prepare(self, ranges: ArrayLike, angles: ArrayLike):
-        a = check_angles(angles)
-        z = check_ranges(ranges, self.max_range)
-        if z.ndim != 1 or z.shape != a.shape:
-            raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
-        sel = select_beams(a.size, self.max_beams)
-        return z[sel], a[sel]
+        return _scan_beams(ranges, angles, self.max_range, self.max_beams)
 
     def expected(self, poses: ArrayLike, angles: ArrayLike, dtype: type = np.float64) -> NDArray:
         """Ray-cast expected ranges ``(N, B)`` for robot ``poses`` (the sensor offset applied).
@@ -675,12 +681,7 @@ class LikelihoodField:
         return out
 
     def _prepare(self, ranges: ArrayLike, angles: ArrayLike):
-        a = check_angles(angles)
-        z = check_ranges(ranges, self.max_range)
-        if z.ndim != 1 or z.shape != a.shape:
-            raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
-        sel = select_beams(a.size, self.max_beams)
-        z, a = z[sel], a[sel]
+        z, a = _scan_beams(ranges, angles, self.max_range, self.max_beams)
         keep = (z < self.max_range) & (z > self.min_range)
         return z[keep], a[keep]
 
