@@ -32,6 +32,8 @@ __all__ = [
 ]
 
 TWO_PI = 2.0 * np.pi
+#: The floor of the mean resultant length in :func:`circular_std`, which takes its logarithm.
+_TINY = 1e-300
 
 
 def wrap_angle(angle: ArrayLike, exact: bool = True) -> NDArray[np.float64] | float:
@@ -255,15 +257,18 @@ def circular_mean(
     >>> round(abs(float(circular_mean(np.radians([179.0, -179.0])))), 6)
     3.141593
     """
+    s, c, _ = _sin_cos_sums(angles, weights, axis)
+    return wrap_angle(np.arctan2(s, c))
+
+
+def _sin_cos_sums(angles: ArrayLike, weights: ArrayLike | None, axis: int):
+    """Weighted sums of the angles' sines and cosines, and the total weight (means and 1 when unweighted)."""
     a = np.asarray(angles, dtype=float)
     w = _weights(weights, a.shape[axis] if a.ndim else 1)
     if w is None:
-        s, c = np.sin(a).mean(axis=axis), np.cos(a).mean(axis=axis)
-    else:
-        w = np.broadcast_to(w, a.shape)
-        s = (w * np.sin(a)).sum(axis=axis)
-        c = (w * np.cos(a)).sum(axis=axis)
-    return wrap_angle(np.arctan2(s, c))
+        return np.sin(a).mean(axis=axis), np.cos(a).mean(axis=axis), None
+    w = np.broadcast_to(w, a.shape)
+    return (w * np.sin(a)).sum(axis=axis), (w * np.cos(a)).sum(axis=axis), w.sum(axis=axis)
 
 
 def circular_std(
@@ -282,16 +287,10 @@ def circular_std(
     >>> round(float(circular_std(a)), 3)
     0.05
     """
-    a = np.asarray(angles, dtype=float)
-    w = _weights(weights, a.shape[axis] if a.ndim else 1)
-    if w is None:
-        s, c = np.sin(a).mean(axis=axis), np.cos(a).mean(axis=axis)
-    else:
-        w = np.broadcast_to(w, a.shape)
-        tot = w.sum(axis=axis)
-        s = (w * np.sin(a)).sum(axis=axis) / tot
-        c = (w * np.cos(a)).sum(axis=axis) / tot
-    r = np.clip(np.hypot(s, c), 1e-300, 1.0)
+    s, c, tot = _sin_cos_sums(angles, weights, axis)
+    if tot is not None:
+        s, c = s / tot, c / tot
+    r = np.clip(np.hypot(s, c), _TINY, 1.0)   # R = 0 (angles spread evenly) would give log(0)
     out = np.sqrt(-2.0 * np.log(r))
     return float(out) if np.ndim(out) == 0 else out
 
