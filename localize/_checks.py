@@ -65,15 +65,19 @@ def check_rng(rng: Any, name: str = "rng") -> np.random.Generator:
     return rng
 
 
-def check_number(value: Any, name: str, unit: str = "") -> float:
-    """``value`` as a finite float; ``TypeError`` if it is not a number, ``ValueError`` if NaN or infinite."""
-    what = f"a number of {unit}" if unit else "a number"
+def _as_float(value: Any, name: str, what: str) -> float:
+    """``float(value)``, or ``TypeError`` saying that ``name`` must be ``what`` (booleans are not numbers)."""
     if isinstance(value, bool):
         raise TypeError(f"{name} must be {what}; got {value!r}")
     try:
-        v = float(value)
+        return float(value)
     except (TypeError, ValueError):
         raise TypeError(f"{name} must be {what}; got {value!r}") from None
+
+
+def check_number(value: Any, name: str, unit: str = "") -> float:
+    """``value`` as a finite float; ``TypeError`` if it is not a number, ``ValueError`` if NaN or infinite."""
+    v = _as_float(value, name, f"a number of {unit}" if unit else "a number")
     if not math.isfinite(v):
         raise ValueError(f"{name} must be finite; got {value!r}")
     return v
@@ -123,12 +127,7 @@ def check_count(value: Any, name: str, minimum: int = 1) -> int:
     ...
     TypeError: n_particles must be a whole number >= 1; got 2.5
     """
-    if isinstance(value, bool):
-        raise TypeError(f"{name} must be a whole number >= {minimum}; got {value!r}")
-    try:
-        f = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a whole number >= {minimum}; got {value!r}") from None
+    f = _as_float(value, name, f"a whole number >= {minimum}")
     if not math.isfinite(f) or f != int(f):
         raise TypeError(f"{name} must be a whole number >= {minimum}; got {value!r}")
     n = int(f)

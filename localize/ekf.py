@@ -773,13 +773,15 @@ class UKFLocalizer(_GaussianLocalizer):
 
     Examples
     --------
-    >>> lms = [[5.0, 0.0], [0.0, 5.0], [-5.0, 0.0]]
-    >>> ukf = UKFLocalizer(lms, 0.1, 0.02, [0.05] * 4 + [0.0, 0.0], dt=1.0,
-    ...                    mean=[0.0, 0.0, 0.0], cov=np.diag([0.5, 0.5, 0.1]))
-    >>> ukf.predict([1.0, 0.0])
-    >>> ukf.update([[4.0, 0.0], [5.099, 1.7682]], ids=[0, 1])
-    >>> ukf.mean.round(1) + 0.0, bool(np.trace(ukf.cov) < 0.1)
-    (array([1., 0., 0.]), True)
+    The EKF's example with :meth:`step` (predict, then update) and
+    unknown correspondences (each sighting associated by maximum likelihood):
+
+    >>> ukf = UKFLocalizer([[5.0, 0.0], [0.0, 5.0], [-5.0, 0.0]], 0.1, 0.02, [0.05] * 4 + [0.0, 0.0],
+    ...                    cov=np.diag([0.5, 0.5, 0.1]))
+    >>> ukf.step([1.0, 0.0], [[4.0, 0.0], [5.099, 1.7682]]).round(1) + 0.0
+    array([1., 0., 0.])
+    >>> bool(np.trace(ukf.cov) < 0.1)
+    True
     """
 
     def __init__(self, landmarks: ArrayLike, sigma_range: float, sigma_bearing: float, alphas: ArrayLike,

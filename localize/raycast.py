@@ -81,7 +81,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._checks import check_angles, check_grid, check_max_range, check_sensor_poses
+from ._checks import check_angles, check_grid, check_max_range, check_positive, check_sensor_poses
 from .grid import OccupancyGrid
 
 __all__ = ["cast", "cast_ray", "RayCaster", "METHODS", "CompactTable", "build_table", "build_compact_table",
@@ -305,13 +305,7 @@ class RayCaster:
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {method!r}")
         self.method = method
-        try:
-            budget = float(table_mb)
-        except (TypeError, ValueError):
-            raise TypeError(f"table_mb must be a number of megabytes; got {table_mb!r}") from None
-        if not budget > 0:
-            raise ValueError(f"table_mb must be a positive number of megabytes; got {table_mb!r}")
-        self.table_mb = budget
+        self.table_mb = budget = check_positive(table_mb, "table_mb", "megabytes")
         if n_bins is None:
             n_bins = compact_bins(self.grid, budget) if method == "compact" else 360
         n_bins = int(n_bins)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._checks import check_positive
 from . import draw_poses, new_axes
 
 __all__ = [
@@ -47,8 +48,7 @@ def covariance_ellipse(mean: ArrayLike, cov: ArrayLike, ax=None, n_std: float = 
     _, ax = new_axes(ax)
     m = np.asarray(mean, dtype=float).reshape(-1)
     c = np.asarray(cov, dtype=float)[:2, :2]
-    if not (np.isfinite(n_std) and n_std > 0):
-        raise ValueError(f"n_std must be a positive number of standard deviations; got {n_std!r}")
+    check_positive(n_std, "n_std", "standard deviations")
     vals, vecs = np.linalg.eigh(0.5 * (c + c.T))
     vals = np.maximum(vals, 0.0)
     angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
