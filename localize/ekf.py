@@ -55,6 +55,10 @@ __all__ = [
 ]
 
 _SMALL = 1e-3  # below this |s| the sinc helpers use their Taylor series
+#: A covariance may be asymmetric by this much (round-off) and still count as symmetric.
+_SYMMETRY_TOL = 1e-12
+#: The UKF raises its covariance's eigenvalues to at least this, so that the next Cholesky factorisation succeeds.
+_MIN_EIGENVALUE = 1e-12
 
 
 # ----------------------------------------------------------------------------
@@ -525,7 +529,7 @@ class _GaussianLocalizer:
         c = np.asarray(cov, dtype=float)
         if c.shape != (3, 3) or np.any(~np.isfinite(c)):
             raise ValueError(f"cov must be a finite (3, 3) matrix; got shape {c.shape}")
-        if not np.allclose(c, c.T, atol=1e-12) or np.min(np.linalg.eigvalsh(c)) <= 0:
+        if not np.allclose(c, c.T, atol=_SYMMETRY_TOL) or np.min(np.linalg.eigvalsh(c)) <= 0:
             raise ValueError("cov must be symmetric positive definite")
         return m, c
 
@@ -818,8 +822,8 @@ class UKFLocalizer(_GaussianLocalizer):
         self.kf.x[2] = wrap_angle(self.kf.x[2])
         P = 0.5 * (self.kf.P + self.kf.P.T)
         w, v = np.linalg.eigh(P)
-        if w.min() <= 1e-12:   # keep P positive definite for the next Cholesky
-            P = (v * np.maximum(w, 1e-12)) @ v.T
+        if w.min() <= _MIN_EIGENVALUE:   # keep P positive definite for the next Cholesky
+            P = (v * np.maximum(w, _MIN_EIGENVALUE)) @ v.T
         self.kf.P = P
 
     def predict(self, u: ArrayLike) -> None:

@@ -65,6 +65,8 @@ __all__ = [
 
 #: The most range levels a uint16 code of the likelihood table can index.
 _MAX_LEVELS = int(np.iinfo(np.uint16).max)
+#: Motion-kernel weights below this fraction of the largest are set to 0 (the blur stays exactly local).
+_KERNEL_CUTOFF = 1e-12
 
 
 def heading_bins(n_headings: int) -> NDArray[np.float64]:
@@ -190,7 +192,7 @@ def shift_kernel(shift: float, sigma: float) -> tuple[int, NDArray[np.float64]]:
     r = int(np.ceil(3 * sig)) + 1
     m = np.arange(-r, r + 1)
     w = np.exp(-0.5 * ((m - f) / sig) ** 2)
-    w[w < 1e-12 * w.max()] = 0.0
+    w[w < _KERNEL_CUTOFF * w.max()] = 0.0
     return n, w / w.sum()
 
 

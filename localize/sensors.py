@@ -61,6 +61,11 @@ _SQRT2PI = math.sqrt(2.0 * math.pi)
 #: Farther than this many sigma_hit from 0 and from max_range, the truncated hit
 #: Gaussian's normaliser eta is 1 to double precision (1 - ndtr(8) < 1e-15).
 _ETA_SIGMAS = 8
+#: Expected ranges below this fraction of max_range are raised to it (a ray cast from inside or against an
+#: obstacle reads 0, where the short-reading density 1 / (1 - exp(-lambda z*)) divides by zero).
+_Z_FLOOR = 1e-3
+#: Probabilities handed to the inverse normal CDF are clipped into [_TINY_P, _BELOW_ONE], where it is finite.
+_TINY_P, _BELOW_ONE = 1e-300, 1 - 1e-16
 
 
 # ------------------------------------------------------------------ helpers
@@ -255,7 +260,7 @@ class BeamModel:
             raise ValueError(f"max_beams must be >= 1 or None; got {max_beams}")
         self.max_beams = None if max_beams is None else int(max_beams)
         self.temper = _check_temper(temper)
-        self.z_floor = 1e-3 * self.max_range
+        self.z_floor = _Z_FLOOR * self.max_range
         if caster is not None:
             if not isinstance(caster, RayCaster):
                 raise TypeError(f"caster must be a localize.raycast.RayCaster; got {type(caster).__name__}")
@@ -476,7 +481,7 @@ class BeamModel:
         k = rng.choice(4, size=zs.shape, p=[self.z_hit, self.z_short, self.z_max, self.z_rand])
         u = rng.random(zs.shape)
         lo, hi = ndtr(-zs / sig), ndtr((zmax - zs) / sig)
-        hit = zs + sig * ndtri(np.clip(lo + u * (hi - lo), 1e-300, 1 - 1e-16))
+        hit = zs + sig * ndtri(np.clip(lo + u * (hi - lo), _TINY_P, _BELOW_ONE))
         short = -np.log1p(u * np.expm1(-lam * zs)) / lam
         rand = u * zmax
         z = np.choose(k, [hit, short, np.full(zs.shape, zmax), rand])
