@@ -910,12 +910,44 @@ class _Sweep:
         pad[:, self.P:self.P + rows] = obst.T
         self.pad = pad
 
+    def _one_way(self, out_rows: NDArray, cols: range, forward: bool, ahead_at: list, behind_at: list,
+                 exits: NDArray, lines: tuple) -> None:
+        """One sweep over the columns: the nearest obstacle entry ahead (forward) or behind, on each line.
+
+        ``cur`` carries, for every line, the entry point of the nearest
+        obstacle met so far in the direction of the sweep; each column's cells
+        read it, then the column's own obstacle cells update it. The backward
+        sweep is the forward one mirrored: columns in the other order, the
+        nearer entry the larger x instead of the smaller, the other row of
+        the column ahead, entry at the cell's other edge.
+        """
+        ol, mine, crossing, xc, xcl, nu, H = lines
+        pad = self.pad
+        fill = np.float32(np.inf if forward else -np.inf)     # no obstacle on the line
+        nearer = np.minimum if forward else np.maximum
+        beyond = np.greater_equal if forward else np.less_equal
+        edge = -0.5 if forward else 0.5                       # where a ray from this side enters a cell
+        cur = np.full(nu, fill, np.float32)
+        for j in cols:
+            ahead = pad[j, ahead_at[j]:ahead_at[j] + nu]
+            behind = pad[j, behind_at[j]:behind_at[j] + nu]
+            if mine[j]:
+                o = ol[j]
+                out = out_rows[j]
+                out[:] = cur[o:o + H]
+                # the centre is in the row behind and the line crosses into the row ahead within the column
+                if crossing[j] and (xcl[j] > j if forward else xcl[j] < j):
+                    nearer(out, xc[j], out=out, where=ahead[o:o + H])
+                out[beyond(out, exits[o:o + H])] = fill
+            if crossing[j]:  # otherwise the row ahead is the row behind, overwritten just below
+                nearer(cur, xc[j], out=cur, where=ahead)
+            cur[behind] = j + edge
+
     def ranges(self, slope: float, res: float, max_range: float, density: int):
         """Forward (+x) and backward (-x) ranges, shape (rows, cols), from every cell centre."""
         H, W = self.shape
         P, pad = self.P, self.pad
         f32 = np.float32
-        inf = f32(np.inf)
         s = float(slope)
         jj = np.arange(W)
         # the family and line of each column's cells: u + c = round(-s * j) to 1/density
@@ -959,36 +991,11 @@ class _Sweep:
             a1l, a2l, xcl = a1.tolist(), a2.tolist(), xc.tolist()
             ol = (base - umin).tolist()
             mine, crossing = cols_q.tolist(), (r1 != r2).tolist()
-            # forward sweep, right to left: cur = nearest obstacle entry ahead on each line
-            cur = np.full(nu, inf, f32)
-            for j in range(W - 1, -1, -1):
-                seg1 = pad[j, a1l[j]:a1l[j] + nu]
-                seg2 = pad[j, a2l[j]:a2l[j] + nu]
-                if mine[j]:
-                    o = ol[j]
-                    out = fwd[j]
-                    out[:] = cur[o:o + H]
-                    if crossing[j] and xcl[j] > j:  # the centre is in r1; r2 lies ahead in the column
-                        np.minimum(out, xc[j], out=out, where=seg2[o:o + H])
-                    out[out >= exit_f[o:o + H]] = inf
-                if crossing[j]:  # otherwise seg2 is seg1, overwritten just below
-                    np.minimum(cur, xc[j], out=cur, where=seg2)
-                cur[seg1] = j - 0.5
-            # backward sweep, left to right: cur = nearest obstacle entry behind
-            cur = np.full(nu, -inf, f32)
-            for j in range(W):
-                seg1 = pad[j, a1l[j]:a1l[j] + nu]
-                seg2 = pad[j, a2l[j]:a2l[j] + nu]
-                if mine[j]:
-                    o = ol[j]
-                    out = bwd[j]
-                    out[:] = cur[o:o + H]
-                    if crossing[j] and xcl[j] < j:  # the centre is in r2; r1 lies behind in the column
-                        np.maximum(out, xc[j], out=out, where=seg1[o:o + H])
-                    out[out <= exit_b[o:o + H]] = -inf
-                if crossing[j]:
-                    np.maximum(cur, xc[j], out=cur, where=seg1)
-                cur[seg2] = j + 0.5
+            # forward sweep, right to left: the row a line leaves a column by (r2) lies ahead;
+            # backward sweep, left to right: the row it enters by (r1) lies ahead
+            lines = (ol, mine, crossing, xc, xcl, nu, H)
+            self._one_way(fwd, range(W - 1, -1, -1), True, a2l, a1l, exit_f, lines)
+            self._one_way(bwd, range(W), False, a1l, a2l, exit_b, lines)
         jc = jj.astype(f32)[:, None]
         step = f32(res * math.sqrt(1.0 + s * s))
         fwd -= jc
