@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from .geometry import as_poses
 
 __all__ = ["PoseShapeWarning", "check_poses", "check_rng", "check_number", "check_positive", "check_nonnegative",
-           "check_probability", "check_count", "check_max_range", "check_angles", "check_grid", "check_sensor_poses"]
+           "check_probability", "check_count", "check_alphas", "check_max_range", "check_angles", "check_grid", "check_sensor_poses"]
 
 #: Radians of round-off allowed beyond 2 pi before beam angles are taken for degrees.
 ANGLE_SLACK = 1e-9
@@ -134,6 +134,26 @@ def check_count(value: Any, name: str, minimum: int = 1) -> int:
     if n < minimum:
         raise ValueError(f"{name} must be a whole number >= {minimum}; got {value!r}")
     return n
+
+
+def check_alphas(alphas: ArrayLike, n: int, name: str = "alphas") -> NDArray[np.float64]:
+    """Motion noise parameters ``alpha1..alphan`` (PR convention: they scale variances) as a finite float array >= 0.
+
+    >>> check_alphas([0.1, 0.0, 0.2, 0.1], 4).tolist()
+    [0.1, 0.0, 0.2, 0.1]
+    >>> check_alphas([0.1, 0.1], 4)
+    Traceback (most recent call last):
+    ...
+    ValueError: alphas must hold 4 numbers (alpha1..alpha4); got shape (2,)
+    """
+    a = np.asarray(alphas, dtype=float)
+    if a.shape != (n,):
+        raise ValueError(f"{name} must hold {n} numbers (alpha1..alpha{n}); got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite; got {a.tolist()}")
+    if np.any(a < 0):
+        raise ValueError(f"{name} must be >= 0 (they scale noise variances); got {a.tolist()}")
+    return a
 
 
 def check_max_range(max_range: Any, name: str = "max_range") -> float:

@@ -34,7 +34,7 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 from numpy.typing import ArrayLike, NDArray
 
 from . import motion as _motion
-from ._checks import check_positive
+from ._checks import check_alphas, check_positive
 from .geometry import as_poses, wrap_angle
 from .sensors import ON_LANDMARK, LandmarkModel, range_bearing, range_bearing_jacobian
 
@@ -64,15 +64,6 @@ _MIN_EIGENVALUE = 1e-12
 # ----------------------------------------------------------------------------
 # small checked-input helpers
 # ----------------------------------------------------------------------------
-
-
-def _alphas(alphas: ArrayLike, n: int, name: str = "alphas") -> NDArray[np.float64]:
-    a = np.asarray(alphas, dtype=float)
-    if a.shape != (n,):
-        raise ValueError(f"{name} must hold {n} noise parameters (PR convention); got shape {a.shape}")
-    if np.any(~np.isfinite(a)) or np.any(a < 0):
-        raise ValueError(f"{name} must be finite and >= 0; got {a.tolist()}")
-    return a
 
 
 def _control(u: ArrayLike, n: int, name: str = "u") -> NDArray[np.float64]:
@@ -203,7 +194,7 @@ def velocity_noise(u: ArrayLike, dt: float, alphas: ArrayLike) -> NDArray[np.flo
     """
     v, w = _control(u, 2)
     check_positive(dt, "dt", "seconds")
-    var_v, var_w, _ = _motion.velocity_variances(v, w, _alphas(alphas, 6))
+    var_v, var_w, _ = _motion.velocity_variances(v, w, check_alphas(alphas, 6))
     return np.diag([float(var_v), float(var_w)])
 
 
@@ -280,7 +271,7 @@ def odometry_noise(u: ArrayLike, alphas: ArrayLike) -> NDArray[np.float64]:
     array([0.035, 0.045, 0.01 ])
     """
     r1, tr, r2 = odometry_controls(u)
-    return np.diag([float(v) for v in _motion.odometry_variances(r1, tr, r2, _alphas(alphas, 4))])
+    return np.diag([float(v) for v in _motion.odometry_variances(r1, tr, r2, check_alphas(alphas, 4))])
 
 
 # ----------------------------------------------------------------------------
@@ -416,7 +407,7 @@ def ekf_localization_known_correspondences(
     v, w = _control(u, 2)
     if w == 0:
         raise ValueError("u[1] (w) must be nonzero in the textbook formulas; use EKFLocalizer for w = 0")
-    a = _alphas(alphas, 6)
+    a = check_alphas(alphas, 6)
     th = mu[2]
     # lines 2-5: Jacobians of g with respect to the state and the control
     G = np.array([[1, 0, -v / w * np.cos(th) + v / w * np.cos(th + w * dt)],
@@ -518,7 +509,7 @@ class _GaussianLocalizer:
         if motion not in ("velocity", "odometry"):
             raise ValueError(f"motion must be 'velocity' or 'odometry'; got {motion!r}")
         self.motion = motion
-        self.alphas = _alphas(alphas, 6 if motion == "velocity" else 4)
+        self.alphas = check_alphas(alphas, 6 if motion == "velocity" else 4)
         self.dt = check_positive(dt, "dt", "seconds")
         self.R1 = self.model.R
 
