@@ -41,8 +41,10 @@ from numpy.typing import ArrayLike, NDArray
 from .geometry import as_poses
 
 __all__ = ["PoseShapeWarning", "check_poses", "check_rng", "check_number", "check_positive", "check_nonnegative",
-           "check_probability", "check_count", "check_max_range", "check_angles", "check_grid", "check_sensor_poses"]
+           "check_probability", "check_count", "check_alphas", "check_max_range", "check_angles", "check_grid", "check_sensor_poses"]
 
+#: Radians of round-off allowed beyond 2 pi before beam angles are taken for degrees.
+ANGLE_SLACK = 1e-9
 #: What every rng error suggests.
 RNG_HINT = "np.random.default_rng(seed)"
 
@@ -63,15 +65,19 @@ def check_rng(rng: Any, name: str = "rng") -> np.random.Generator:
     return rng
 
 
-def check_number(value: Any, name: str, unit: str = "") -> float:
-    """``value`` as a finite float; ``TypeError`` if it is not a number, ``ValueError`` if NaN or infinite."""
-    what = f"a number of {unit}" if unit else "a number"
+def _as_float(value: Any, name: str, what: str) -> float:
+    """``float(value)``, or ``TypeError`` saying that ``name`` must be ``what`` (booleans are not numbers)."""
     if isinstance(value, bool):
         raise TypeError(f"{name} must be {what}; got {value!r}")
     try:
-        v = float(value)
+        return float(value)
     except (TypeError, ValueError):
         raise TypeError(f"{name} must be {what}; got {value!r}") from None
+
+
+def check_number(value: Any, name: str, unit: str = "") -> float:
+    """``value`` as a finite float; ``TypeError`` if it is not a number, ``ValueError`` if NaN or infinite."""
+    v = _as_float(value, name, f"a number of {unit}" if unit else "a number")
     if not math.isfinite(v):
         raise ValueError(f"{name} must be finite; got {value!r}")
     return v
@@ -121,18 +127,33 @@ def check_count(value: Any, name: str, minimum: int = 1) -> int:
     ...
     TypeError: n_particles must be a whole number >= 1; got 2.5
     """
-    if isinstance(value, bool):
-        raise TypeError(f"{name} must be a whole number >= {minimum}; got {value!r}")
-    try:
-        f = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a whole number >= {minimum}; got {value!r}") from None
+    f = _as_float(value, name, f"a whole number >= {minimum}")
     if not math.isfinite(f) or f != int(f):
         raise TypeError(f"{name} must be a whole number >= {minimum}; got {value!r}")
     n = int(f)
     if n < minimum:
         raise ValueError(f"{name} must be a whole number >= {minimum}; got {value!r}")
     return n
+
+
+def check_alphas(alphas: ArrayLike, n: int, name: str = "alphas") -> NDArray[np.float64]:
+    """Motion noise parameters ``alpha1..alphan`` (PR convention: they scale variances) as a finite float array >= 0.
+
+    >>> check_alphas([0.1, 0.0, 0.2, 0.1], 4).tolist()
+    [0.1, 0.0, 0.2, 0.1]
+    >>> check_alphas([0.1, 0.1], 4)
+    Traceback (most recent call last):
+    ...
+    ValueError: alphas must hold 4 numbers (alpha1..alpha4); got shape (2,)
+    """
+    a = np.asarray(alphas, dtype=float)
+    if a.shape != (n,):
+        raise ValueError(f"{name} must hold {n} numbers (alpha1..alpha{n}); got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite; got {a.tolist()}")
+    if np.any(a < 0):
+        raise ValueError(f"{name} must be >= 0 (they scale noise variances); got {a.tolist()}")
+    return a
 
 
 def check_max_range(max_range: Any, name: str = "max_range") -> float:
@@ -153,7 +174,7 @@ def check_angles(angles: ArrayLike, name: str = "angles") -> NDArray[np.float64]
         raise ValueError(f"{name} must be a 1-D array of beam angles in radians; got shape {a.shape}")
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name} must be finite (radians relative to the sensor heading); found NaN or inf")
-    if a.size and float(np.max(np.abs(a))) > 2 * np.pi + 1e-9:
+    if a.size and float(np.max(np.abs(a))) > 2 * np.pi + ANGLE_SLACK:
         raise ValueError(f"{name}: beam angles must be radians in [-2 pi, 2 pi]; got values up to "
                          f"{float(np.max(np.abs(a))):g} -- degrees? convert with np.radians({name})")
     return a

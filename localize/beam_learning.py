@@ -42,6 +42,13 @@ from .sensors import BeamModel, check_ranges
 
 __all__ = ["BeamFit", "fit_beam_model"]
 
+#: The rate of short readings (1/m) is searched in this bracket; at its ends the fit stops at the end.
+_LAMBDA_BRACKET = (1e-6, 1e6)
+#: The EM never lets sigma_hit (m) or lambda_short (1/m) fall below this: a zero would make the model degenerate.
+_MIN_PARAM = 1e-6
+#: Densities below this are raised to it before their logarithm (a reading no component explains).
+_TINY_DENSITY = 1e-300
+
 _NAMES = ("z_hit", "z_short", "z_max", "z_rand", "sigma_hit", "lambda_short")
 
 
@@ -92,7 +99,7 @@ def _solve_lambda(e: np.ndarray, z: np.ndarray, zs: np.ndarray, lam0: float) -> 
         tail = np.where(x < 1e-8, 1.0 / lam - zs / 2, zs / np.expm1(np.minimum(x, 700.0)))
         return s / lam - ez - float((e * tail).sum())
 
-    lo, hi = 1e-6, 1e6
+    lo, hi = _LAMBDA_BRACKET
     if score(lo) <= 0:
         return lo  # short readings look uniform over [0, z*]: the rate tends to 0
     if score(hi) >= 0:
@@ -165,13 +172,14 @@ def fit_beam_model(z: ArrayLike, z_expected: ArrayLike, max_range: float, init: 
             e_short = np.where(at_max, 0.0, w_short / dens)
             e_rand = np.where(at_max, 0.0, w_rand / dens)
         e_max = at_max.astype(float)
-        ll = float(np.where(at_max, np.log(max(model.z_max, 1e-300)), np.log(np.maximum(dens, 1e-300))).mean())
+        ll = float(np.where(at_max, np.log(max(model.z_max, _TINY_DENSITY)),
+                            np.log(np.maximum(dens, _TINY_DENSITY))).mean())
         history.append(ll)
         # M-step
         z_hit, z_short, z_max, z_rand = e_hit.mean(), e_short.mean(), e_max.mean(), e_rand.mean()
         sh = e_hit.sum()
         sigma = float(np.sqrt((e_hit * (zz - zs) ** 2).sum() / sh)) if sh > 0 else model.sigma_hit
-        sigma = max(sigma, 1e-6)
+        sigma = max(sigma, _MIN_PARAM)
         if exact_lambda:
             lam = _solve_lambda(e_short, zz, zs, model.lambda_short)
         else:
@@ -179,7 +187,7 @@ def fit_beam_model(z: ArrayLike, z_expected: ArrayLike, max_range: float, init: 
             lam = float(e_short.sum() / ss) if ss > 0 else model.lambda_short
         tot = z_hit + z_short + z_max + z_rand
         model = BeamModel(None, zmax, z_hit / tot, z_short / tot, z_max / tot, z_rand / tot,
-                          sigma_hit=sigma, lambda_short=max(lam, 1e-6))
+                          sigma_hit=sigma, lambda_short=max(lam, _MIN_PARAM))
         if len(history) > 1 and abs(history[-1] - history[-2]) < tol:
             converged = True
             break

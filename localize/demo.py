@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import maps, sim
+from ._checks import check_rng
 from .grid import OccupancyGrid
 from .io.cmu import write_cmu_map
 from .io.tum import write_tum
@@ -76,8 +77,7 @@ def make_demo(folder: PathLike, rng: np.random.Generator, steps: int = 150) -> D
     >>> len(io.read_log(d.log_path)), io.read_map(d.map_path).resolution
     (5, 0.1)
     """
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    check_rng(rng)
     steps = int(steps)
     if steps < 2:
         raise ValueError(f"steps must be >= 2; got {steps}")

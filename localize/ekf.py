@@ -34,7 +34,9 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 from numpy.typing import ArrayLike, NDArray
 
 from . import motion as _motion
+from ._checks import check_alphas, check_positive
 from .geometry import as_poses, wrap_angle
+from .sensors import ON_LANDMARK, LandmarkModel, range_bearing, range_bearing_jacobian
 
 __all__ = [
     "velocity_motion",
@@ -53,27 +55,15 @@ __all__ = [
 ]
 
 _SMALL = 1e-3  # below this |s| the sinc helpers use their Taylor series
+#: A covariance may be asymmetric by this much (round-off) and still count as symmetric.
+_SYMMETRY_TOL = 1e-12
+#: The UKF raises its covariance's eigenvalues to at least this, so that the next Cholesky factorisation succeeds.
+_MIN_EIGENVALUE = 1e-12
 
 
 # ----------------------------------------------------------------------------
 # small checked-input helpers
 # ----------------------------------------------------------------------------
-
-
-def _positive(value: float, name: str) -> float:
-    v = float(value)
-    if not np.isfinite(v) or v <= 0:
-        raise ValueError(f"{name} must be a finite number > 0; got {value!r}")
-    return v
-
-
-def _alphas(alphas: ArrayLike, n: int, name: str = "alphas") -> NDArray[np.float64]:
-    a = np.asarray(alphas, dtype=float)
-    if a.shape != (n,):
-        raise ValueError(f"{name} must hold {n} noise parameters (PR convention); got shape {a.shape}")
-    if np.any(~np.isfinite(a)) or np.any(a < 0):
-        raise ValueError(f"{name} must be finite and >= 0; got {a.tolist()}")
-    return a
 
 
 def _control(u: ArrayLike, n: int, name: str = "u") -> NDArray[np.float64]:
@@ -140,7 +130,7 @@ def velocity_motion(poses: ArrayLike, u: ArrayLike, dt: float) -> NDArray[np.flo
     """
     p = as_poses(poses)
     v, w = _control(u, 2)
-    return _motion.move_velocity(p, v, w, _positive(dt, "dt"))
+    return _motion.move_velocity(p, v, w, check_positive(dt, "dt", "seconds"))
 
 
 def velocity_jacobians(pose: ArrayLike, u: ArrayLike, dt: float) -> tuple[NDArray, NDArray]:
@@ -163,7 +153,7 @@ def velocity_jacobians(pose: ArrayLike, u: ArrayLike, dt: float) -> tuple[NDArra
     """
     x, y, th = _pose(pose)
     v, w = _control(u, 2)
-    dt = _positive(dt, "dt")
+    dt = check_positive(dt, "dt", "seconds")
     half = 0.5 * w * dt
     s, ds = float(_sinc(np.asarray(half))), float(_dsinc(half))
     c, sn = np.cos(th + half), np.sin(th + half)
@@ -203,8 +193,8 @@ def velocity_noise(u: ArrayLike, dt: float, alphas: ArrayLike) -> NDArray[np.flo
            [0.  , 0.05]])
     """
     v, w = _control(u, 2)
-    _positive(dt, "dt")
-    var_v, var_w, _ = _motion.velocity_variances(v, w, _alphas(alphas, 6))
+    check_positive(dt, "dt", "seconds")
+    var_v, var_w, _ = _motion.velocity_variances(v, w, check_alphas(alphas, 6))
     return np.diag([float(var_v), float(var_w)])
 
 
@@ -281,7 +271,7 @@ def odometry_noise(u: ArrayLike, alphas: ArrayLike) -> NDArray[np.float64]:
     array([0.035, 0.045, 0.01 ])
     """
     r1, tr, r2 = odometry_controls(u)
-    return np.diag([float(v) for v in _motion.odometry_variances(r1, tr, r2, _alphas(alphas, 4))])
+    return np.diag([float(v) for v in _motion.odometry_variances(r1, tr, r2, check_alphas(alphas, 4))])
 
 
 # ----------------------------------------------------------------------------
@@ -291,6 +281,8 @@ def odometry_noise(u: ArrayLike, alphas: ArrayLike) -> NDArray[np.float64]:
 
 def landmark_measurement(poses: ArrayLike, landmark: ArrayLike) -> NDArray[np.float64]:
     """Expected range and bearing of one landmark, ``h(x, m)`` (PR table 7.2, line 12).
+
+    The landmark model's :func:`localize.sensors.range_bearing`, with checked input.
 
     Parameters
     ----------
@@ -312,16 +304,14 @@ def landmark_measurement(poses: ArrayLike, landmark: ArrayLike) -> NDArray[np.fl
     m = np.asarray(landmark, dtype=float)
     if m.shape != (2,) or np.any(~np.isfinite(m)):
         raise ValueError(f"landmark must be a finite (x, y) pair; got {np.asarray(landmark).tolist()!r}")
-    dx, dy = m[0] - p[..., 0], m[1] - p[..., 1]
-    r = np.hypot(dx, dy)
-    b = wrap_angle(np.arctan2(dy, dx) - p[..., 2])
-    return np.stack(np.broadcast_arrays(r, b), axis=-1)
+    return range_bearing(p, m)
 
 
 def landmark_jacobian(pose: ArrayLike, landmark: ArrayLike) -> NDArray[np.float64]:
     """Jacobian ``H = dh/dx`` (2x3) of the range-bearing measurement (PR table 7.2, line 13).
 
-    ``H = [[-dx/r, -dy/r, 0], [dy/q, -dx/q, -1]]`` with ``q = r**2``.
+    ``H = [[-dx/r, -dy/r, 0], [dy/q, -dx/q, -1]]`` with ``q = r**2``: the
+    landmark model's :func:`localize.sensors.range_bearing_jacobian`, checked.
 
     Raises
     ------
@@ -334,16 +324,15 @@ def landmark_jacobian(pose: ArrayLike, landmark: ArrayLike) -> NDArray[np.float6
     array([[-0.6 , -0.8 ,  0.  ],
            [ 0.16, -0.12, -1.  ]])
     """
-    x, y, _ = _pose(pose)
+    p = _pose(pose)
     m = np.asarray(landmark, dtype=float)
     if m.shape != (2,):
         raise ValueError(f"landmark must be an (x, y) pair; got shape {m.shape}")
-    dx, dy = m[0] - x, m[1] - y
-    q = dx * dx + dy * dy
-    if q < 1e-18:
-        raise ValueError(f"pose {pose!r} coincides with landmark {m.tolist()}: the bearing Jacobian is undefined")
-    r = np.sqrt(q)
-    return np.array([[-dx / r, -dy / r, 0.0], [dy / q, -dx / q, -1.0]])
+    H, on = range_bearing_jacobian(p, m)
+    if on:
+        raise ValueError(f"pose {p.tolist()} coincides with landmark {m.tolist()} "
+                         f"(nearer than ON_LANDMARK = {ON_LANDMARK:g} m): the bearing Jacobian is undefined")
+    return H
 
 
 def numerical_jacobian(f, x: ArrayLike, eps: float = 1e-6, angle_rows: tuple[int, ...] = ()) -> NDArray[np.float64]:
@@ -359,7 +348,7 @@ def numerical_jacobian(f, x: ArrayLike, eps: float = 1e-6, angle_rows: tuple[int
            [ 0.16, -0.12, -1.  ]])
     """
     x = np.asarray(x, dtype=float)
-    eps = _positive(eps, "eps")
+    eps = check_positive(eps, "eps")
     cols = []
     for i in range(x.size):
         d = np.zeros_like(x)
@@ -418,7 +407,7 @@ def ekf_localization_known_correspondences(
     v, w = _control(u, 2)
     if w == 0:
         raise ValueError("u[1] (w) must be nonzero in the textbook formulas; use EKFLocalizer for w = 0")
-    a = _alphas(alphas, 6)
+    a = check_alphas(alphas, 6)
     th = mu[2]
     # lines 2-5: Jacobians of g with respect to the state and the control
     G = np.array([[1, 0, -v / w * np.cos(th) + v / w * np.cos(th + w * dt)],
@@ -471,41 +460,17 @@ class _PoseEKF(ExtendedKalmanFilter):
         self.x = self.g(self.x)
 
 
-_TWO_PI = 2.0 * np.pi
-
-
-def _wrap(a):
-    """Fast wrap to [-pi, pi) for the filters' inner loops (no input checks)."""
-    return np.mod(a + np.pi, _TWO_PI) - np.pi
-
-
-def _h(x, m) -> NDArray[np.float64]:
-    """Unchecked range-bearing of landmark ``m`` from pose ``x`` (inner-loop version)."""
-    dx, dy = m[0] - x[0], m[1] - x[1]
-    return np.array([np.hypot(dx, dy), _wrap(np.arctan2(dy, dx) - x[2])])
-
-
-def _H(x, m) -> NDArray[np.float64] | None:
-    """Unchecked Jacobian of :func:`_h`; None when the pose is on the landmark."""
-    dx, dy = m[0] - x[0], m[1] - x[1]
-    q = dx * dx + dy * dy
-    if q < 1e-18:
-        return None
-    r = np.sqrt(q)
-    return np.array([[-dx / r, -dy / r, 0.0], [dy / q, -dx / q, -1.0]])
-
-
 def _residual_z(a, b):
     d = np.array(a, dtype=float) - b
     flat = d.reshape(-1)
-    flat[1::2] = _wrap(flat[1::2])
+    flat[1::2] = wrap_angle(flat[1::2])
     return d
 
 
 def _residual_x(a, b):
     d = np.array(a, dtype=float) - b
     flat = d.reshape(-1)
-    flat[2] = _wrap(flat[2])
+    flat[2] = wrap_angle(flat[2])
     return d
 
 
@@ -537,18 +502,16 @@ class _GaussianLocalizer:
     """Shared set-up, checks and accessors of the EKF and the UKF."""
 
     def __init__(self, landmarks, sigma_range, sigma_bearing, alphas, motion, dt, mean, cov):
-        lms = np.asarray(landmarks, dtype=float)
-        if lms.ndim != 2 or lms.shape[1] != 2 or lms.shape[0] < 1 or np.any(~np.isfinite(lms)):
-            raise ValueError(f"landmarks must be a finite (L, 2) array with L >= 1; got shape {lms.shape}")
-        self.landmarks = lms
-        self.sigma_range = _positive(sigma_range, "sigma_range")
-        self.sigma_bearing = _positive(sigma_bearing, "sigma_bearing")
+        #: The measurement model: its h, H and noise R are the filter's.
+        self.model = LandmarkModel(landmarks, sigma_range, sigma_bearing)
+        self.landmarks = self.model.landmarks
+        self.sigma_range, self.sigma_bearing = self.model.sigma_range, self.model.sigma_bearing
         if motion not in ("velocity", "odometry"):
             raise ValueError(f"motion must be 'velocity' or 'odometry'; got {motion!r}")
         self.motion = motion
-        self.alphas = _alphas(alphas, 6 if motion == "velocity" else 4)
-        self.dt = _positive(dt, "dt")
-        self.R1 = np.diag([self.sigma_range**2, self.sigma_bearing**2])
+        self.alphas = check_alphas(alphas, 6 if motion == "velocity" else 4)
+        self.dt = check_positive(dt, "dt", "seconds")
+        self.R1 = self.model.R
 
     @staticmethod
     def _check_belief(mean, cov):
@@ -557,7 +520,7 @@ class _GaussianLocalizer:
         c = np.asarray(cov, dtype=float)
         if c.shape != (3, 3) or np.any(~np.isfinite(c)):
             raise ValueError(f"cov must be a finite (3, 3) matrix; got shape {c.shape}")
-        if not np.allclose(c, c.T, atol=1e-12) or np.min(np.linalg.eigvalsh(c)) <= 0:
+        if not np.allclose(c, c.T, atol=_SYMMETRY_TOL) or np.min(np.linalg.eigvalsh(c)) <= 0:
             raise ValueError("cov must be symmetric positive definite")
         return m, c
 
@@ -602,19 +565,15 @@ class _GaussianLocalizer:
         if len(zz) == 0:
             return np.zeros(0, dtype=np.int64)
         x, P = self.mean, self.cov
-        d = self.landmarks - x[:2]                                      # (L, 2)
-        q = np.maximum((d * d).sum(axis=1), 1e-18)
-        r = np.sqrt(q)
-        zhat = np.stack([r, _wrap(np.arctan2(d[:, 1], d[:, 0]) - x[2])], axis=1)   # (L, 2)
-        H = np.zeros((len(d), 2, 3))                                    # the Jacobians of all landmarks
-        H[:, 0, 0], H[:, 0, 1] = -d[:, 0] / r, -d[:, 1] / r
-        H[:, 1, 0], H[:, 1, 1], H[:, 1, 2] = d[:, 1] / q, -d[:, 0] / q, -1.0
+        zhat = range_bearing(x, self.landmarks)                         # (L, 2)
+        H, on = range_bearing_jacobian(x, self.landmarks)               # the Jacobians of all landmarks
         S = H @ P @ H.transpose(0, 2, 1) + self.R1                      # (L, 2, 2)
         Sinv = np.linalg.inv(S)
         logdet = np.log(np.linalg.det(S))
         e = zz[:, None, :] - zhat[None]                                 # (K, L, 2)
-        e[..., 1] = _wrap(e[..., 1])
+        e[..., 1] = wrap_angle(e[..., 1])
         ll = -0.5 * (np.einsum("kli,lij,klj->kl", e, Sinv, e) + logdet)
+        ll[:, on] = -np.inf                                             # on a landmark: its bearing says nothing
         return np.argmax(ll, axis=1).astype(np.int64)
 
     def associate_loop(self, z: ArrayLike) -> NDArray[np.int64]:
@@ -625,11 +584,11 @@ class _GaussianLocalizer:
         for k, zk in enumerate(zz):
             best, best_ll = 0, -np.inf
             for j, m in enumerate(self.landmarks):
-                H = _H(mean, m)
-                if H is None:
+                H, on = range_bearing_jacobian(mean, m)
+                if on:
                     continue
                 S = H @ cov @ H.T + self.R1
-                e = _residual_z(zk, _h(mean, m))
+                e = _residual_z(zk, range_bearing(mean, m))
                 ll = -0.5 * (e @ np.linalg.solve(S, e) + np.log(np.linalg.det(S)))
                 if ll > best_ll:
                     best, best_ll = j, ll
@@ -733,7 +692,7 @@ class EKFLocalizer(_GaussianLocalizer):
         self.kf.F = np.asarray(F, dtype=float)
         self.kf.Q = np.asarray(Q, dtype=float)
         self.kf.predict()
-        self.kf.x[2, 0] = _wrap(self.kf.x[2, 0])
+        self.kf.x[2, 0] = wrap_angle(self.kf.x[2, 0])
         self.kf.x_prior = self.kf.x.copy()
 
     def update_model(self, z: ArrayLike, hx, H: ArrayLike, R: ArrayLike, residual=None) -> None:
@@ -757,7 +716,7 @@ class EKFLocalizer(_GaussianLocalizer):
         self.kf.update(zz, HJacobian=lambda x: Hm,
                        Hx=lambda x: np.asarray(hx(x.reshape(3)), dtype=float).reshape(-1, 1),
                        R=np.asarray(R, dtype=float), residual=res)
-        self.kf.x[2, 0] = _wrap(self.kf.x[2, 0])
+        self.kf.x[2, 0] = wrap_angle(self.kf.x[2, 0])
         self.kf.P = 0.5 * (self.kf.P + self.kf.P.T)
 
     # -- the localization steps -------------------------------------------------
@@ -786,10 +745,10 @@ class EKFLocalizer(_GaussianLocalizer):
             ii = self.associate(zz) if len(zz) else np.zeros(0, dtype=int)
         for zk, j in zip(zz, ii):
             m = self.landmarks[j]
-            H = _H(self.kf.x[:, 0], m)
-            if H is None:
+            H, on = range_bearing_jacobian(self.kf.x[:, 0], m)
+            if on:
                 continue  # on top of the landmark: the bearing says nothing
-            self.update_model(zk, lambda x, m=m: _h(x, m), H, self.R1, residual=_residual_z)
+            self.update_model(zk, lambda x, m=m: range_bearing(x, m), H, self.R1, residual=_residual_z)
 
 
 class UKFLocalizer(_GaussianLocalizer):
@@ -809,13 +768,15 @@ class UKFLocalizer(_GaussianLocalizer):
 
     Examples
     --------
-    >>> lms = [[5.0, 0.0], [0.0, 5.0], [-5.0, 0.0]]
-    >>> ukf = UKFLocalizer(lms, 0.1, 0.02, [0.05] * 4 + [0.0, 0.0], dt=1.0,
-    ...                    mean=[0.0, 0.0, 0.0], cov=np.diag([0.5, 0.5, 0.1]))
-    >>> ukf.predict([1.0, 0.0])
-    >>> ukf.update([[4.0, 0.0], [5.099, 1.7682]], ids=[0, 1])
-    >>> ukf.mean.round(1) + 0.0, bool(np.trace(ukf.cov) < 0.1)
-    (array([1., 0., 0.]), True)
+    The EKF's example with :meth:`step` (predict, then update) and
+    unknown correspondences (each sighting associated by maximum likelihood):
+
+    >>> ukf = UKFLocalizer([[5.0, 0.0], [0.0, 5.0], [-5.0, 0.0]], 0.1, 0.02, [0.05] * 4 + [0.0, 0.0],
+    ...                    cov=np.diag([0.5, 0.5, 0.1]))
+    >>> ukf.step([1.0, 0.0], [[4.0, 0.0], [5.099, 1.7682]]).round(1) + 0.0
+    array([1., 0., 0.])
+    >>> bool(np.trace(ukf.cov) < 0.1)
+    True
     """
 
     def __init__(self, landmarks: ArrayLike, sigma_range: float, sigma_bearing: float, alphas: ArrayLike,
@@ -823,7 +784,7 @@ class UKFLocalizer(_GaussianLocalizer):
                  cov: ArrayLike | None = None, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
         cov = np.eye(3) if cov is None else cov
         super().__init__(landmarks, sigma_range, sigma_bearing, alphas, motion, dt, mean, cov)
-        points = MerweScaledSigmaPoints(3, alpha=_positive(alpha, "alpha"), beta=float(beta), kappa=float(kappa),
+        points = MerweScaledSigmaPoints(3, alpha=check_positive(alpha, "alpha"), beta=float(beta), kappa=float(kappa),
                                         subtract=_residual_x)
         self.kf = _VectorUKF(dim_x=3, dim_z=2, dt=self.dt, hx=None, fx=None, points=points,
                                         x_mean_fn=_state_mean, z_mean_fn=_z_mean,
@@ -849,11 +810,11 @@ class UKFLocalizer(_GaussianLocalizer):
 
     def _fix(self) -> None:
         self.kf.x = np.asarray(self.kf.x, dtype=float).reshape(3)
-        self.kf.x[2] = _wrap(self.kf.x[2])
+        self.kf.x[2] = wrap_angle(self.kf.x[2])
         P = 0.5 * (self.kf.P + self.kf.P.T)
         w, v = np.linalg.eigh(P)
-        if w.min() <= 1e-12:   # keep P positive definite for the next Cholesky
-            P = (v * np.maximum(w, 1e-12)) @ v.T
+        if w.min() <= _MIN_EIGENVALUE:   # keep P positive definite for the next Cholesky
+            P = (v * np.maximum(w, _MIN_EIGENVALUE)) @ v.T
         self.kf.P = P
 
     def predict(self, u: ArrayLike) -> None:
@@ -878,9 +839,7 @@ class UKFLocalizer(_GaussianLocalizer):
         lms = self.landmarks[ii]
 
         def hx_flat(x):
-            d = lms - np.asarray(x)[:2]
-            b = _wrap(np.arctan2(d[:, 1], d[:, 0]) - x[2])
-            return np.stack([np.hypot(d[:, 0], d[:, 1]), b], axis=-1).reshape(-1)
+            return range_bearing(x, lms).reshape(-1)
 
         self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
         R = np.kron(np.eye(len(zz)), self.R1)

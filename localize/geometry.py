@@ -13,6 +13,8 @@ in the frame of ``a``, brought into the frame in which ``a`` is expressed.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -30,21 +32,37 @@ __all__ = [
 ]
 
 TWO_PI = 2.0 * np.pi
+#: The floor of the mean resultant length in :func:`circular_std`, which takes its logarithm.
+_TINY = 1e-300
 
 
-def wrap_angle(angle: ArrayLike) -> NDArray[np.float64] | float:
+def wrap_angle(angle: ArrayLike, exact: bool = True) -> NDArray[np.float64] | float:
     """Wrap angles to the half-open interval ``[-pi, pi)``.
+
+    The one angle wrap of the package: the motion models, the sensor models
+    and the Kalman filters all call it.
 
     Parameters
     ----------
     angle : array_like
         Angles in radians, any shape.
+    exact : bool
+        ``True`` (default): the result lies in ``[-pi, pi)`` without
+        exception, and an angle already inside is returned bit for bit (so
+        wrapping twice changes nothing). ``False``: only the formula
+        ``a - 2 pi floor((a + pi) / 2 pi)``, a little faster on big arrays; its
+        result may land on ``+pi``, or one ulp beyond either end, and an angle
+        one ulp below ``+pi`` comes back near ``-pi``. Good enough inside a
+        periodic function (a density, a cosine); not for a heading that is
+        stored and compared (re-wrapping it must change nothing, and ``+pi``
+        and ``-pi`` must not be two headings).
 
     Returns
     -------
     float or ndarray
         The same angles, shifted by multiples of ``2*pi`` into ``[-pi, pi)``.
-        A Python float (or 0-d input) gives a float back.
+        A Python float (or 0-d input) gives a float back; NaN and infinities
+        give NaN.
 
     Examples
     --------
@@ -55,18 +73,41 @@ def wrap_angle(angle: ArrayLike) -> NDArray[np.float64] | float:
     -3.141592653589793
     """
     a = np.asarray(angle, dtype=float)
-    # floor is much faster than np.remainder for large arrays
-    w = a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
-    w = np.atleast_1d(w)
-    # rounding can leave a value one ulp outside [-pi, pi): fold it back
-    w[w >= np.pi] -= TWO_PI
-    w[w < -np.pi] += TWO_PI
-    # Angles already inside the interval are returned untouched: the shift
-    # by pi and back would round those within one ulp of +pi to -pi.
-    np.copyto(w, np.atleast_1d(a), where=np.atleast_1d((a >= -np.pi) & (a < np.pi)))
-    w = w.reshape(a.shape)
-    if w.ndim == 0:
-        return float(w)
+    if a.ndim == 0:
+        return _wrap_scalar(float(a), exact)
+    w = a + np.pi
+    w *= 1.0 / TWO_PI
+    np.floor(w, out=w)
+    w *= -TWO_PI
+    w += a                       # a - 2 pi k: in [-pi, pi] up to one rounding
+    if exact:
+        # Only values on or beyond an end need a second look (rare): fold what
+        # rounding left outside, and give back inputs that were already inside
+        # (the shift by pi and back rounds those within one ulp of +pi to -pi).
+        edge = np.flatnonzero((w <= -np.pi) | (w >= np.pi))
+        if edge.size:
+            flat, src = w.reshape(-1), a.reshape(-1)
+            e, s = flat[edge], src[edge]
+            e[e >= np.pi] -= TWO_PI
+            e[e < -np.pi] += TWO_PI
+            inside = (s >= -np.pi) & (s < np.pi)
+            e[inside] = s[inside]
+            flat[edge] = e
+    return w
+
+
+def _wrap_scalar(a: float, exact: bool) -> float:
+    """:func:`wrap_angle` of one float, without numpy's per-call overhead."""
+    if exact and -math.pi <= a < math.pi:
+        return a
+    if not math.isfinite(a):
+        return math.nan
+    w = a - TWO_PI * math.floor((a + math.pi) / TWO_PI)
+    if exact:
+        if w >= math.pi:
+            w -= TWO_PI
+        elif w < -math.pi:
+            w += TWO_PI
     return w
 
 
@@ -216,15 +257,18 @@ def circular_mean(
     >>> round(abs(float(circular_mean(np.radians([179.0, -179.0])))), 6)
     3.141593
     """
+    s, c, _ = _sin_cos_sums(angles, weights, axis)
+    return wrap_angle(np.arctan2(s, c))
+
+
+def _sin_cos_sums(angles: ArrayLike, weights: ArrayLike | None, axis: int):
+    """Weighted sums of the angles' sines and cosines, and the total weight (means and 1 when unweighted)."""
     a = np.asarray(angles, dtype=float)
     w = _weights(weights, a.shape[axis] if a.ndim else 1)
     if w is None:
-        s, c = np.sin(a).mean(axis=axis), np.cos(a).mean(axis=axis)
-    else:
-        w = np.broadcast_to(w, a.shape)
-        s = (w * np.sin(a)).sum(axis=axis)
-        c = (w * np.cos(a)).sum(axis=axis)
-    return wrap_angle(np.arctan2(s, c))
+        return np.sin(a).mean(axis=axis), np.cos(a).mean(axis=axis), None
+    w = np.broadcast_to(w, a.shape)
+    return (w * np.sin(a)).sum(axis=axis), (w * np.cos(a)).sum(axis=axis), w.sum(axis=axis)
 
 
 def circular_std(
@@ -243,16 +287,10 @@ def circular_std(
     >>> round(float(circular_std(a)), 3)
     0.05
     """
-    a = np.asarray(angles, dtype=float)
-    w = _weights(weights, a.shape[axis] if a.ndim else 1)
-    if w is None:
-        s, c = np.sin(a).mean(axis=axis), np.cos(a).mean(axis=axis)
-    else:
-        w = np.broadcast_to(w, a.shape)
-        tot = w.sum(axis=axis)
-        s = (w * np.sin(a)).sum(axis=axis) / tot
-        c = (w * np.cos(a)).sum(axis=axis) / tot
-    r = np.clip(np.hypot(s, c), 1e-300, 1.0)
+    s, c, tot = _sin_cos_sums(angles, weights, axis)
+    if tot is not None:
+        s, c = s / tot, c / tot
+    r = np.clip(np.hypot(s, c), _TINY, 1.0)   # R = 0 (angles spread evenly) would give log(0)
     out = np.sqrt(-2.0 * np.log(r))
     return float(out) if np.ndim(out) == 0 else out
 

@@ -20,6 +20,8 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._checks import check_count, check_positive, check_rng
+
 __all__ = ["OccupancyGrid"]
 
 
@@ -83,12 +85,7 @@ class OccupancyGrid:
                 "data must hold occupancy probabilities in [0, 1] (NaN marks unknown cells); "
                 f"found {arr[tuple(bad)]!r} at row {bad[0]}, column {bad[1]}"
             )
-        try:
-            res = float(resolution)
-        except (TypeError, ValueError):
-            raise ValueError(f"resolution must be a positive number of metres per cell; got {resolution!r}") from None
-        if not np.isfinite(res) or res <= 0:
-            raise ValueError(f"resolution must be a positive, finite number of metres per cell; got {resolution!r}")
+        res = check_positive(resolution, "resolution", "metres per cell")
         org = np.asarray(origin, dtype=float)
         if org.shape != (2,):
             raise ValueError(f"origin must be a pair (x, y) in metres; got shape {org.shape}")
@@ -373,11 +370,8 @@ class OccupancyGrid:
         >>> bool(np.all(g.is_free(p)))
         True
         """
-        if not isinstance(rng, np.random.Generator):
-            raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
-        n = int(n)
-        if n < 0:
-            raise ValueError(f"n must be >= 0; got {n}")
+        check_rng(rng)
+        n = check_count(n, "n", minimum=0)
         free = np.flatnonzero(self.free)
         if free.size == 0:
             raise ValueError("the map has no free cell to sample from")

@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
+from ._checks import check_angles, check_grid, check_max_range, check_nonnegative
 from .discrete import ZeroLikelihoodError
 from .geometry import as_poses, wrap_angle
 from .grid import OccupancyGrid
@@ -61,6 +62,11 @@ __all__ = [
     "update_readable",
     "gaussian_beam_pdf",
 ]
+
+#: The most range levels a uint16 code of the likelihood table can index.
+_MAX_LEVELS = int(np.iinfo(np.uint16).max)
+#: Motion-kernel weights below this fraction of the largest are set to 0 (the blur stays exactly local).
+_KERNEL_CUTOFF = 1e-12
 
 
 def heading_bins(n_headings: int) -> NDArray[np.float64]:
@@ -133,7 +139,7 @@ def expected_range_table(grid: OccupancyGrid, n_headings: int, max_range: float,
         caster = raycast.RayCaster(grid, max_range, method="lut", n_bins=int(n_headings))
         codes = caster.table.reshape(h, w, n_headings)              # heading k * 2 pi / K
         table = codes.astype(np.float32) * np.float32(caster.lut_scale)
-        table[codes == 65535] = max_range
+        table[codes == raycast.LUT_MAX_CODE] = max_range
         # our bin k is at -pi + k * 2 pi / K = the table's bin (k + K/2) mod K
         table = np.roll(table, -n_headings // 2, axis=2)
         return np.ascontiguousarray(np.moveaxis(table, 2, 0))
@@ -186,7 +192,7 @@ def shift_kernel(shift: float, sigma: float) -> tuple[int, NDArray[np.float64]]:
     r = int(np.ceil(3 * sig)) + 1
     m = np.arange(-r, r + 1)
     w = np.exp(-0.5 * ((m - f) / sig) ** 2)
-    w[w < 1e-12 * w.max()] = 0.0
+    w[w < _KERNEL_CUTOFF * w.max()] = 0.0
     return n, w / w.sum()
 
 
@@ -268,29 +274,20 @@ class GridLocalizer:
                  beam_pdf: Callable | None = None, alphas: ArrayLike = (0.05, 0.005, 0.05, 0.005),
                  min_sigma_xy: float = 0.5, min_sigma_theta: float = 0.5,
                  range_step: float | None = None) -> None:
-        if not isinstance(grid, OccupancyGrid):
-            raise TypeError(f"grid must be an OccupancyGrid; got {type(grid).__name__}")
-        self.grid = grid
+        self.grid = grid = check_grid(grid)
         self.theta = heading_bins(n_headings)
         self.K = len(self.theta)
         self.bin_width = 2 * np.pi / self.K
-        mr = float(max_range)
-        if not np.isfinite(mr) or mr <= 0:
-            raise ValueError(f"max_range must be a positive number of metres; got {max_range!r}")
-        self.max_range = mr
-        a = np.atleast_1d(np.asarray(angles, dtype=float))
-        if a.ndim != 1 or a.size == 0 or not np.all(np.isfinite(a)):
-            raise ValueError(f"angles must be a non-empty 1-D array of finite beam angles; got shape {a.shape}")
-        if float(np.max(np.abs(a))) > 2 * np.pi + 1e-9:
-            raise ValueError(f"beam angles must be radians in [-2 pi, 2 pi]; got values up to "
-                             f"{float(np.max(np.abs(a))):g} -- degrees? convert with np.radians(angles)")
+        self.max_range = mr = check_max_range(max_range)
+        a = check_angles(angles)
+        if a.size == 0:
+            raise ValueError("angles must hold at least one beam angle; got an empty array")
         self.angles = a
         self.beam_bins = np.round(np.asarray(wrap_angle(a)) / self.bin_width).astype(int) % self.K
         self.alphas = np.asarray(alphas, dtype=float)
         odometry_variances(0.0, 0.0, 0.0, self.alphas)   # validates alphas
-        self.min_sigma_xy, self.min_sigma_theta = float(min_sigma_xy), float(min_sigma_theta)
-        if self.min_sigma_xy < 0 or self.min_sigma_theta < 0:
-            raise ValueError("min_sigma_xy and min_sigma_theta must be >= 0")
+        self.min_sigma_xy = check_nonnegative(min_sigma_xy, "min_sigma_xy", "cells")
+        self.min_sigma_theta = check_nonnegative(min_sigma_theta, "min_sigma_theta", "heading bins")
         self.pdf = beam_pdf if beam_pdf is not None else gaussian_beam_pdf(sigma_hit, mr, z_hit)
         if expected is None:
             expected = expected_range_table(grid, self.K, mr)
@@ -304,8 +301,9 @@ class GridLocalizer:
         if self.range_step <= 0:
             raise ValueError(f"range_step must be > 0; got {range_step!r}")
         self.n_levels = int(np.ceil(mr / self.range_step)) + 1
-        if self.n_levels > 65535:
-            raise ValueError(f"max_range / range_step = {self.n_levels} levels exceeds 65535; use a larger range_step")
+        if self.n_levels > _MAX_LEVELS:
+            raise ValueError(f"max_range / range_step = {self.n_levels} levels exceeds {_MAX_LEVELS} (the codes are "
+                             "uint16); use a larger range_step")
         self.expected = e
         self.codes = np.round(np.minimum(e, mr) / self.range_step).astype(np.uint16)
         self.free = grid.free

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import discrete
+from ._checks import check_nonnegative
 from .discrete import ZeroLikelihoodError, as_belief, as_kernel
 
 __all__ = [
@@ -42,6 +43,8 @@ __all__ = [
 
 #: The four unit moves of the tile world, as (drow, dcol) with row 0 at the top.
 STEPS = {"up": (-1, 0), "down": (1, 0), "left": (0, -1), "right": (0, 1)}
+#: How far from 1 the motion kernel's probabilities may sum (round-off of decimal inputs such as 0.1).
+_SUM_TOL = 1e-9
 
 
 def _world(world: ArrayLike, shape: tuple[int, ...] | None) -> NDArray:
@@ -51,16 +54,6 @@ def _world(world: ArrayLike, shape: tuple[int, ...] | None) -> NDArray:
     if shape is not None and w.shape != shape:
         raise ValueError(f"world and belief must have the same shape; world has {w.shape}, belief has {shape}")
     return w
-
-
-def _weight(x: float, name: str) -> float:
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number; got {x!r}") from None
-    if not np.isfinite(v) or v < 0:
-        raise ValueError(f"{name} must be a finite probability >= 0; got {x!r}")
-    return v
 
 
 def likelihood(world: ArrayLike, measurement, p_hit: float, p_miss: float) -> NDArray[np.float64]:
@@ -79,7 +72,7 @@ def likelihood(world: ArrayLike, measurement, p_hit: float, p_miss: float) -> ND
     array([[0.15, 0.85]])
     """
     w = _world(world, None)
-    ph, pm = _weight(p_hit, "p_hit"), _weight(p_miss, "p_miss")
+    ph, pm = check_nonnegative(p_hit, "p_hit"), check_nonnegative(p_miss, "p_miss")
     if ph == 0 and pm == 0:
         raise ValueError("p_hit and p_miss are both zero; at least one must be > 0")
     match = w == measurement
@@ -209,7 +202,7 @@ def move(belief: ArrayLike, step, kernel: ArrayLike | None = None, fill: float =
     if b.ndim != 2:
         raise ValueError(f"belief must be a 2-D array over the tiles; got shape {b.shape}")
     k = np.ones((1, 1)) if kernel is None else as_kernel(kernel, 2)
-    f = _weight(fill, "fill")
+    f = check_nonnegative(fill, "fill")
     out = discrete._predict(b, k, offset=_step(step), mode=mode, cval=f if mode == "constant" else 0.0)
     if not normalize:
         return out
@@ -243,10 +236,10 @@ def noisy_step_kernel(step, p_forward: float = 0.5, p_diagonal: float = 0.2,
     dr, dc = _step(step)
     if abs(dr) + abs(dc) != 1:
         raise ValueError(f"step must be one of the four unit moves (up, down, left, right); got {step!r}")
-    pf, pd, ps = (_weight(v, n) for v, n in [(p_forward, "p_forward"), (p_diagonal, "p_diagonal"),
+    pf, pd, ps = (check_nonnegative(v, n) for v, n in [(p_forward, "p_forward"), (p_diagonal, "p_diagonal"),
                                              (p_stay, "p_stay")])
     total = pf + 2 * pd + ps
-    if abs(total - 1.0) > 1e-9:
+    if abs(total - 1.0) > _SUM_TOL:
         raise ValueError(f"p_forward + 2 * p_diagonal + p_stay must be 1; got {total:.6g}")
     k = np.zeros((3, 3))
     k[1, 1] = pf

@@ -55,12 +55,15 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._checks import check_max_range, check_positive
 from .geometry import as_poses, compose, wrap_angle
 from .grid import OccupancyGrid
 
 #: An end point that lies exactly on a cell border (ray casters return such ranges) is
 #: counted in the cell beyond it, the obstacle whose surface stopped the beam.
 _HIT_EPS = 1e-6
+#: A map larger than this many cells is taken for a mistake in its resolution or extent.
+_MAX_CELLS = 50_000_000
 
 __all__ = [
     "log_odds",
@@ -223,12 +226,10 @@ class OccupancyMapper:
             raise ValueError(f"shape must be a pair (rows, columns); got {shape!r}") from None
         if h < 1 or w < 1:
             raise ValueError(f"shape must have at least one row and one column; got {shape!r}")
-        if h * w > 50_000_000:
+        if h * w > _MAX_CELLS:
             raise ValueError(f"shape {shape} has {h * w} cells; more than 50 million is surely a mistake "
                              "(coarser resolution or a smaller extent?)")
-        res = float(resolution)
-        if not np.isfinite(res) or res <= 0:
-            raise ValueError(f"resolution must be a positive number of metres; got {resolution!r}")
+        res = check_positive(resolution, "resolution", "metres per cell")
         org = np.asarray(origin, dtype=float)
         if org.shape != (2,) or not np.all(np.isfinite(org)):
             raise ValueError(f"origin must be a finite pair (x, y); got {origin!r}")
@@ -241,8 +242,7 @@ class OccupancyMapper:
                              f"{p_free}, {p_prior}, {p_occ}")
         if not p_min < p_prior < p_max:
             raise ValueError(f"need p_min < p_prior < p_max; got {p_min}, {p_prior}, {p_max}")
-        if not (np.isfinite(usable_range) and usable_range > 0):
-            raise ValueError(f"usable_range must be a positive number of metres; got {usable_range!r}")
+        check_positive(usable_range, "usable_range", "metres")
         st = res / 2.0 if step is None else float(step)
         if not (np.isfinite(st) and 0 < st <= res):
             raise ValueError(f"step must be in (0, resolution] = (0, {res:g}] metres; got {step!r}")
@@ -302,10 +302,7 @@ class OccupancyMapper:
             raise ValueError(f"ranges ({z.size}) and angles ({a.size}) must have one value per beam")
         if np.any(~np.isfinite(z)) or np.any(z < 0):
             raise ValueError("ranges must be finite and >= 0 (use max_range for 'no return')")
-        mr = float(max_range)
-        if not (np.isfinite(mr) and mr > 0):
-            raise ValueError(f"max_range must be a positive number of metres; got {max_range!r}")
-        return p, z, a, mr
+        return p, z, a, check_max_range(max_range)
 
     # ------------------------------------------------------------ readable version
     def update_loop(self, laser_pose: ArrayLike, ranges: ArrayLike, angles: ArrayLike, max_range: float) -> None:

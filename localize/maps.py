@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from ._checks import check_rng
 from .grid import OccupancyGrid
 
 __all__ = ["hallway", "office", "symmetric_room", "random_rooms", "benchmark_map", "draw_box", "tile_world", "city_world"]
@@ -165,8 +166,7 @@ def random_rooms(
     >>> g.shape, bool(g.obstacles[0].all())
     ((50, 80), True)
     """
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError("rng must be a numpy.random.Generator")
+    check_rng(rng)
     h, w = (int(s) for s in shape)
     if h < 3 or w < 3:
         raise ValueError(f"shape must be at least (3, 3); got {shape}")
@@ -252,8 +252,7 @@ def city_world(blocks: tuple[int, int], block: int, rng: np.random.Generator, n_
     >>> fine.shape, coarse.shape
     ((15, 20), (3, 4))
     """
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError("rng must be a numpy.random.Generator")
+    check_rng(rng)
     hb, wb = (int(v) for v in blocks)
     if hb < 1 or wb < 1 or int(block) < 1:
         raise ValueError(f"blocks and block must be >= 1; got {blocks} and {block}")

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import discrete
 from . import histogram as hist
+from ._checks import check_rng
 
 __all__ = ["MultiScaleLocalizer", "SingleScaleLocalizer", "simulate_readings"]
 
@@ -281,8 +282,7 @@ def simulate_readings(fine: ArrayLike, coarse: ArrayLike, block: int, start: tup
     >>> t.tolist(), f.tolist(), c.tolist()
     ([[0, 0], [0, 1], [0, 2]], [0, 0, 1], [0, 0, 1])
     """
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError("rng must be a numpy.random.Generator")
+    check_rng(rng)
     f, c, b = _check_worlds(fine, coarse, block)
     fl, cl = np.unique(f), np.unique(c)
     pos = np.array(start, dtype=int)

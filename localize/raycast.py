@@ -81,56 +81,28 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .geometry import as_poses
+from ._checks import check_angles, check_grid, check_max_range, check_positive, check_sensor_poses
 from .grid import OccupancyGrid
 
 __all__ = ["cast", "cast_ray", "RayCaster", "METHODS", "CompactTable", "build_table", "build_compact_table",
-           "compact_bins", "coded_sum"]
+           "compact_bins", "coded_sum", "LUT_MAX_CODE", "COMPACT_MAX_CODE"]
 
 METHODS = ("exact", "march", "lut", "compact")
 _OUTSIDE = ("zero", "raise")
+#: The "lut" table's uint16 code for ``max_range`` (the largest uint16): ``max_range / 65535`` metres per unit.
+LUT_MAX_CODE = 65535
+#: The compact table's uint8 code for ``max_range`` (the largest uint8): ``max_range / 255`` metres per unit.
+COMPACT_MAX_CODE = 255
+#: Rows of the compact table transposed at a time: a tile of 16384 x n_bins bytes stays in the CPU's cache.
+_TRANSPOSE_TILE = 16384
+#: The ray marcher's iteration cap: 4 steps per cell of max_range, plus 100 (the geometry never needs it;
+#: rays still running then are finished by the exact cell walk).
+_MARCH_STEPS_PER_CELL, _MARCH_EXTRA_STEPS = 4, 100
+#: Heading-bin coordinates are kept this far (in bins) below ``n_bins`` so that a float32 sum wraps once.
+_BIN_MARGIN = 1e-3
 
 
 # ----------------------------------------------------------------- checking
-def _check_grid(grid: OccupancyGrid) -> OccupancyGrid:
-    if not isinstance(grid, OccupancyGrid):
-        raise TypeError(f"grid must be a localize.OccupancyGrid; got {type(grid).__name__}")
-    return grid
-
-
-def _check_max_range(max_range: float) -> float:
-    try:
-        m = float(max_range)
-    except (TypeError, ValueError):
-        raise TypeError(f"max_range must be a number of metres; got {max_range!r}") from None
-    if not np.isfinite(m) or m <= 0:
-        raise ValueError(f"max_range must be a positive, finite number of metres; got {max_range!r}")
-    return m
-
-
-def _check_angles(angles: ArrayLike) -> NDArray[np.float64]:
-    a = np.asarray(angles, dtype=float)
-    if a.ndim == 0:
-        a = a.reshape(1)
-    if a.ndim != 1:
-        raise ValueError(f"angles must be a 1-D array of beam angles in radians; got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError("angles must be finite (radians relative to the sensor heading); found NaN or inf")
-    if a.size and float(np.max(np.abs(a))) > 2 * np.pi + 1e-9:
-        raise ValueError(f"beam angles must be radians in [-2 pi, 2 pi]; got values up to {float(np.max(np.abs(a))):g}"
-                         " -- degrees? convert with np.radians(angles)")
-    return a
-
-
-def _check_poses(poses: ArrayLike) -> NDArray[np.float64]:
-    p = as_poses(poses, "poses")
-    if p.ndim == 1:
-        p = p[None, :]
-    if p.ndim != 2:
-        raise ValueError(f"poses must be an (N, 3) array of sensor poses; got shape {p.shape}")
-    return p
-
-
 def _inside_or_raise(grid: OccupancyGrid, poses: NDArray, outside: str) -> NDArray[np.bool_]:
     if outside not in _OUTSIDE:
         raise ValueError(f"outside must be one of {_OUTSIDE}; got {outside!r}")
@@ -179,8 +151,8 @@ def cast_ray(grid: OccupancyGrid, x: float, y: float, angle: float, max_range: f
     >>> cast_ray(g, 0.75, 0.25, np.pi / 2, 10.0)   # leaves the map: no return
     10.0
     """
-    grid = _check_grid(grid)
-    max_range = _check_max_range(max_range)
+    grid = check_grid(grid)
+    max_range = check_max_range(max_range)
     res = grid.resolution
     rows, cols = grid.shape
     obstacles = grid.obstacles
@@ -196,18 +168,8 @@ def cast_ray(grid: OccupancyGrid, x: float, y: float, angle: float, max_range: f
     limit = max_range / res
     # Distance t (along the ray, in cells) to the first vertical and the first
     # horizontal grid line, and between successive lines of each kind.
-    if dx > 0:
-        step_j, t_next_x, t_delta_x = 1, (j + 1 - gx) / dx, 1 / dx
-    elif dx < 0:
-        step_j, t_next_x, t_delta_x = -1, (gx - j) / -dx, -1 / dx
-    else:
-        step_j, t_next_x, t_delta_x = 0, math.inf, math.inf
-    if dy > 0:
-        step_i, t_next_y, t_delta_y = 1, (i + 1 - gy) / dy, 1 / dy
-    elif dy < 0:
-        step_i, t_next_y, t_delta_y = -1, (gy - i) / -dy, -1 / dy
-    else:
-        step_i, t_next_y, t_delta_y = 0, math.inf, math.inf
+    step_j, t_next_x, t_delta_x = _first_crossing(gx, j, dx)
+    step_i, t_next_y, t_delta_y = _first_crossing(gy, i, dy)
     while True:
         if t_next_x < t_next_y:  # cross a vertical line: next column
             t = t_next_x
@@ -223,6 +185,20 @@ def cast_ray(grid: OccupancyGrid, x: float, y: float, angle: float, max_range: f
             return max_range
         if obstacles[i, j]:
             return float(t * res)
+
+
+def _first_crossing(pos: float, cell: int, d: float) -> tuple[int, float, float]:
+    """Along one axis: the cell step, the distance to the first grid line, and between lines.
+
+    ``pos`` is the ray's start in cell units, ``cell`` its cell, ``d`` the
+    axis component of the ray's unit direction. A ray parallel to the lines
+    (``d = 0``) never crosses one.
+    """
+    if d > 0:
+        return 1, (cell + 1 - pos) / d, 1 / d
+    if d < 0:
+        return -1, (pos - cell) / -d, -1 / d
+    return 0, math.inf, math.inf
 
 
 def _cast_exact(grid: OccupancyGrid, poses: NDArray, angles: NDArray, max_range: float,
@@ -324,18 +300,12 @@ class RayCaster:
 
     def __init__(self, grid: OccupancyGrid, max_range: float, method: str = "lut",
                  n_bins: int | None = None, outside: str = "zero", table_mb: float = 90.0) -> None:
-        self.grid = _check_grid(grid)
-        self.max_range = _check_max_range(max_range)
+        self.grid = check_grid(grid)
+        self.max_range = check_max_range(max_range)
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}; got {method!r}")
         self.method = method
-        try:
-            budget = float(table_mb)
-        except (TypeError, ValueError):
-            raise TypeError(f"table_mb must be a number of megabytes; got {table_mb!r}") from None
-        if not budget > 0:
-            raise ValueError(f"table_mb must be a positive number of megabytes; got {table_mb!r}")
-        self.table_mb = budget
+        self.table_mb = budget = check_positive(table_mb, "table_mb", "megabytes")
         if n_bins is None:
             n_bins = compact_bins(self.grid, budget) if method == "compact" else 360
         n_bins = int(n_bins)
@@ -364,8 +334,8 @@ class RayCaster:
         >>> RayCaster(g, 10.0, method="lut", n_bins=8).cast([[1.5, 0.5, 0.0]], [0.0, np.pi])
         array([[5., 1.]])
         """
-        p = _check_poses(poses)
-        a = _check_angles(angles)
+        p = check_sensor_poses(poses)
+        a = check_angles(angles)
         inside = _inside_or_raise(self.grid, p, self.outside)
         if p.shape[0] == 0 or a.shape[0] == 0:
             return np.zeros((p.shape[0], a.shape[0]), dtype=dtype)
@@ -403,8 +373,8 @@ class RayCaster:
         """
         if self.method != "compact":
             raise ValueError(f"cast_codes needs method='compact'; this caster uses {self.method!r}")
-        p = _check_poses(poses)
-        a = _check_angles(angles)
+        p = check_sensor_poses(poses)
+        a = check_angles(angles)
         inside = _inside_or_raise(self.grid, p, self.outside)
         if p.shape[0] == 0 or a.shape[0] == 0:
             return np.zeros((p.shape[0], a.shape[0]), dtype=np.uint8), self.compact_table.levels
@@ -532,7 +502,7 @@ class RayCaster:
         fbuf = np.empty(m, np.uint8)
         kbuf = np.empty(m, f32 if hp * wp < 2**24 else np.float64)
         ibuf = np.empty(m, np.int32 if hp * wp < 2**31 else np.int64)
-        cap = int(4 * limit) + 100
+        cap = int(_MARCH_STEPS_PER_CELL * limit) + _MARCH_EXTRA_STEPS
         fallback = ray[:0]
         for _ in range(cap):
             size = ray.size
@@ -631,7 +601,7 @@ class RayCaster:
     @property
     def lut_scale(self) -> float:
         """Metres per unit of the table's uint16 code."""
-        return self.max_range / 65535.0
+        return self.max_range / LUT_MAX_CODE
 
     def _lut_cast(self, p: NDArray, a: NDArray, inside: NDArray) -> NDArray:
         grid = self.grid
@@ -692,7 +662,7 @@ def _wrap_bins(x: NDArray[np.float64], nb: int) -> NDArray[np.float32]:
     """Bin coordinates in [0, nb + 1) as float32 in [0, nb - 1e-3]."""
     y = x.astype(np.float32)
     y[y >= nb] -= np.float32(nb)
-    return np.minimum(y, np.float32(nb - 1e-3))
+    return np.minimum(y, np.float32(nb - _BIN_MARGIN))
 
 
 def build_table(grid: OccupancyGrid, max_range: float, n_bins: int = 360,
@@ -718,19 +688,41 @@ def build_table(grid: OccupancyGrid, max_range: float, n_bins: int = 360,
     >>> (t[1] * 10.0 / 65535).round(3)    # cell (0, 1): headings 0, 45, 90, ... degrees
     array([ 1.75, 10.  , 10.  , 10.  ,  0.25, 10.  , 10.  , 10.  ])
     """
-    grid = _check_grid(grid)
-    max_range = _check_max_range(max_range)
+    grid, max_range, n_bins, line_density = _check_table(grid, max_range, n_bins, line_density)
+    rows, cols = grid.shape
+    scale = max_range / LUT_MAX_CODE
+    to_code = np.float32(1.0 / scale)
+    table = np.empty((rows * cols, n_bins), dtype=np.uint16)
+    for k, transposed, fwd, bwd in _bin_sweeps(grid, max_range, n_bins, line_density):
+        if transposed:
+            fwd, bwd = fwd.T, bwd.T
+        table[:, k] = np.rint(fwd.ravel() * to_code).astype(np.uint16)
+        table[:, k + n_bins // 2] = np.rint(bwd.ravel() * to_code).astype(np.uint16)
+    return table
+
+
+def _check_table(grid, max_range, n_bins, line_density) -> tuple[OccupancyGrid, float, int, int]:
+    """The checked arguments of :func:`build_table` and :func:`build_compact_table`."""
+    grid = check_grid(grid)
+    max_range = check_max_range(max_range)
     n_bins = int(n_bins)
     if n_bins < 4 or n_bins % 2:
         raise ValueError(f"n_bins must be an even integer >= 4; got {n_bins}")
     line_density = int(line_density)
     if not 1 <= line_density <= 16:
         raise ValueError(f"line_density must be an integer in 1..16; got {line_density}")
+    return grid, max_range, n_bins, line_density
+
+
+def _bin_sweeps(grid: OccupancyGrid, max_range: float, n_bins: int, line_density: int):
+    """The sweeps of both lookup tables: for each pair of opposite heading bins ``k`` and ``k + n_bins / 2``.
+
+    Yields ``(k, transposed, fwd, bwd)``: the ranges at heading ``k`` and at
+    the opposite heading, as ``(W, H)`` arrays when ``transposed`` is false
+    (the sweep ran along the columns: the heading is nearer the x axis) and
+    ``(H, W)`` arrays when it is true.
+    """
     obst = grid.obstacles
-    rows, cols = obst.shape
-    res = grid.resolution
-    scale = max_range / 65535.0
-    table = np.empty((rows * cols, n_bins), dtype=np.uint16)
     sweeps = {False: _Sweep(obst), True: _Sweep(obst.T)}
     for k in range(n_bins // 2):
         phi = 2.0 * np.pi * k / n_bins
@@ -739,14 +731,10 @@ def build_table(grid: OccupancyGrid, max_range: float, n_bins: int = 360,
             transposed, slope, forward_positive = False, s / c, c > 0
         else:
             transposed, slope, forward_positive = True, c / s, s > 0
-        fwd, bwd = sweeps[transposed].ranges(slope, res, max_range, line_density)
-        if transposed:
-            fwd, bwd = fwd.T, bwd.T
+        fwd, bwd = sweeps[transposed].ranges(slope, grid.resolution, max_range, line_density)
         if not forward_positive:
             fwd, bwd = bwd, fwd
-        table[:, k] = np.rint(fwd.ravel() * np.float32(1.0 / scale)).astype(np.uint16)
-        table[:, k + n_bins // 2] = np.rint(bwd.ravel() * np.float32(1.0 / scale)).astype(np.uint16)
-    return table
+        yield k, transposed, fwd, bwd
 
 
 @dataclass(frozen=True)
@@ -774,13 +762,13 @@ class CompactTable:
     @property
     def step(self) -> float:
         """Metres per code unit, ``max_range / 255``."""
-        return self.max_range / 255.0
+        return self.max_range / COMPACT_MAX_CODE
 
     @property
     def levels(self) -> NDArray[np.float32]:
         """The range of every code, ``(256,)`` float32 (codes above 255 do not occur)."""
-        levels = (np.arange(256) * self.step).astype(np.float32)
-        levels[255] = self.max_range  # exactly, not a rounding above it
+        levels = (np.arange(COMPACT_MAX_CODE + 1) * self.step).astype(np.float32)
+        levels[COMPACT_MAX_CODE] = self.max_range  # exactly, not a rounding above it
         return levels
 
     @property
@@ -807,7 +795,7 @@ def compact_bins(grid: OccupancyGrid, table_mb: float = 90.0) -> int:
     >>> compact_bins(benchmark_map(800, 0.1))   # 609,000 open cells, 86 MB
     140
     """
-    grid = _check_grid(grid)
+    grid = check_grid(grid)
     n_rows = int((~grid.obstacles).sum()) + 1
     room = float(table_mb) * 1e6 - 4 * grid.obstacles.size
     nb = int(room // n_rows) // 2 * 2
@@ -854,43 +842,25 @@ def build_compact_table(grid: OccupancyGrid, max_range: float, n_bins: int = 144
     >>> (t.codes[1] * t.step).round(2)     # cell (0, 1): headings 0, 45, 90, ... degrees
     array([ 1.76, 10.  , 10.  , 10.  ,  0.24, 10.  , 10.  , 10.  ])
     """
-    grid = _check_grid(grid)
-    max_range = _check_max_range(max_range)
-    n_bins = int(n_bins)
-    if n_bins < 4 or n_bins % 2:
-        raise ValueError(f"n_bins must be an even integer >= 4; got {n_bins}")
-    line_density = int(line_density)
-    if not 1 <= line_density <= 16:
-        raise ValueError(f"line_density must be an integer in 1..16; got {line_density}")
+    grid, max_range, n_bins, line_density = _check_table(grid, max_range, n_bins, line_density)
     obst = grid.obstacles
     rows, cols = obst.shape
-    res = grid.resolution
     open_i, open_j = np.nonzero(~obst)
     row_of_cell = np.zeros(rows * cols, dtype=np.int32)
     row_of_cell[open_i * cols + open_j] = np.arange(1, open_i.size + 1, dtype=np.int32)
     # where each open cell's value sits in the sweeps' (column, row) and (row, column) layouts
     where = {False: (open_j * rows + open_i).astype(np.intp), True: (open_i * cols + open_j).astype(np.intp)}
     by_bin = np.zeros((n_bins, open_i.size + 1), dtype=np.uint8)
-    to_code = np.float32(255.0 / max_range)
-    sweeps = {False: _Sweep(obst), True: _Sweep(obst.T)}
-    for k in range(n_bins // 2):
-        phi = 2.0 * np.pi * k / n_bins
-        c, s = math.cos(phi), math.sin(phi)
-        if abs(c) >= abs(s):
-            transposed, slope, forward_positive = False, s / c, c > 0
-        else:
-            transposed, slope, forward_positive = True, c / s, s > 0
-        fwd, bwd = sweeps[transposed].ranges(slope, res, max_range, line_density)
-        if not forward_positive:
-            fwd, bwd = bwd, fwd
+    to_code = np.float32(COMPACT_MAX_CODE / max_range)
+    for k, transposed, fwd, bwd in _bin_sweeps(grid, max_range, n_bins, line_density):
         for kk, r in ((k, fwd), (k + n_bins // 2, bwd)):
             v = r.T.ravel().take(where[transposed])  # r.T is the sweep's contiguous array
             v *= to_code
             v += np.float32(0.5)
             by_bin[kk, 1:] = v.astype(np.uint8)
     codes = np.empty((open_i.size + 1, n_bins), dtype=np.uint8)
-    for c0 in range(0, codes.shape[0], 16384):  # transpose in tiles that stay in cache
-        codes[c0:c0 + 16384] = by_bin[:, c0:c0 + 16384].T
+    for c0 in range(0, codes.shape[0], _TRANSPOSE_TILE):  # transpose in tiles that stay in cache
+        codes[c0:c0 + _TRANSPOSE_TILE] = by_bin[:, c0:c0 + _TRANSPOSE_TILE].T
     return CompactTable(codes, row_of_cell, n_bins, max_range)
 
 
@@ -940,12 +910,44 @@ class _Sweep:
         pad[:, self.P:self.P + rows] = obst.T
         self.pad = pad
 
+    def _one_way(self, out_rows: NDArray, cols: range, forward: bool, ahead_at: list, behind_at: list,
+                 exits: NDArray, lines: tuple) -> None:
+        """One sweep over the columns: the nearest obstacle entry ahead (forward) or behind, on each line.
+
+        ``cur`` carries, for every line, the entry point of the nearest
+        obstacle met so far in the direction of the sweep; each column's cells
+        read it, then the column's own obstacle cells update it. The backward
+        sweep is the forward one mirrored: columns in the other order, the
+        nearer entry the larger x instead of the smaller, the other row of
+        the column ahead, entry at the cell's other edge.
+        """
+        ol, mine, crossing, xc, xcl, nu, H = lines
+        pad = self.pad
+        fill = np.float32(np.inf if forward else -np.inf)     # no obstacle on the line
+        nearer = np.minimum if forward else np.maximum
+        beyond = np.greater_equal if forward else np.less_equal
+        edge = -0.5 if forward else 0.5                       # where a ray from this side enters a cell
+        cur = np.full(nu, fill, np.float32)
+        for j in cols:
+            ahead = pad[j, ahead_at[j]:ahead_at[j] + nu]
+            behind = pad[j, behind_at[j]:behind_at[j] + nu]
+            if mine[j]:
+                o = ol[j]
+                out = out_rows[j]
+                out[:] = cur[o:o + H]
+                # the centre is in the row behind and the line crosses into the row ahead within the column
+                if crossing[j] and (xcl[j] > j if forward else xcl[j] < j):
+                    nearer(out, xc[j], out=out, where=ahead[o:o + H])
+                out[beyond(out, exits[o:o + H])] = fill
+            if crossing[j]:  # otherwise the row ahead is the row behind, overwritten just below
+                nearer(cur, xc[j], out=cur, where=ahead)
+            cur[behind] = j + edge
+
     def ranges(self, slope: float, res: float, max_range: float, density: int):
         """Forward (+x) and backward (-x) ranges, shape (rows, cols), from every cell centre."""
         H, W = self.shape
         P, pad = self.P, self.pad
         f32 = np.float32
-        inf = f32(np.inf)
         s = float(slope)
         jj = np.arange(W)
         # the family and line of each column's cells: u + c = round(-s * j) to 1/density
@@ -989,36 +991,11 @@ class _Sweep:
             a1l, a2l, xcl = a1.tolist(), a2.tolist(), xc.tolist()
             ol = (base - umin).tolist()
             mine, crossing = cols_q.tolist(), (r1 != r2).tolist()
-            # forward sweep, right to left: cur = nearest obstacle entry ahead on each line
-            cur = np.full(nu, inf, f32)
-            for j in range(W - 1, -1, -1):
-                seg1 = pad[j, a1l[j]:a1l[j] + nu]
-                seg2 = pad[j, a2l[j]:a2l[j] + nu]
-                if mine[j]:
-                    o = ol[j]
-                    out = fwd[j]
-                    out[:] = cur[o:o + H]
-                    if crossing[j] and xcl[j] > j:  # the centre is in r1; r2 lies ahead in the column
-                        np.minimum(out, xc[j], out=out, where=seg2[o:o + H])
-                    out[out >= exit_f[o:o + H]] = inf
-                if crossing[j]:  # otherwise seg2 is seg1, overwritten just below
-                    np.minimum(cur, xc[j], out=cur, where=seg2)
-                cur[seg1] = j - 0.5
-            # backward sweep, left to right: cur = nearest obstacle entry behind
-            cur = np.full(nu, -inf, f32)
-            for j in range(W):
-                seg1 = pad[j, a1l[j]:a1l[j] + nu]
-                seg2 = pad[j, a2l[j]:a2l[j] + nu]
-                if mine[j]:
-                    o = ol[j]
-                    out = bwd[j]
-                    out[:] = cur[o:o + H]
-                    if crossing[j] and xcl[j] < j:  # the centre is in r2; r1 lies behind in the column
-                        np.maximum(out, xc[j], out=out, where=seg1[o:o + H])
-                    out[out <= exit_b[o:o + H]] = -inf
-                if crossing[j]:
-                    np.maximum(cur, xc[j], out=cur, where=seg1)
-                cur[seg2] = j + 0.5
+            # forward sweep, right to left: the row a line leaves a column by (r2) lies ahead;
+            # backward sweep, left to right: the row it enters by (r1) lies ahead
+            lines = (ol, mine, crossing, xc, xcl, nu, H)
+            self._one_way(fwd, range(W - 1, -1, -1), True, a2l, a1l, exit_f, lines)
+            self._one_way(bwd, range(W), False, a1l, a2l, exit_b, lines)
         jc = jj.astype(f32)[:, None]
         step = f32(res * math.sqrt(1.0 + s * s))
         fwd -= jc

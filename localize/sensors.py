@@ -41,26 +41,34 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtr, ndtri
 
+from ._checks import (
+    check_angles,
+    check_grid,
+    check_max_range,
+    check_number,
+    check_positive,
+    check_rng,
+    check_sensor_poses,
+)
 from .geometry import as_poses, wrap_angle
 from .grid import OccupancyGrid
-from .raycast import RayCaster, _check_angles, _check_grid, _check_max_range, coded_sum
+from .raycast import RayCaster, coded_sum
 
-__all__ = ["BeamModel", "LikelihoodField", "LandmarkModel", "check_ranges", "sensor_poses", "select_beams"]
+__all__ = ["BeamModel", "LikelihoodField", "LandmarkModel", "range_bearing", "range_bearing_jacobian", "ON_LANDMARK",
+           "check_ranges", "sensor_poses", "select_beams"]
 
 _SQRT2PI = math.sqrt(2.0 * math.pi)
+#: Farther than this many sigma_hit from 0 and from max_range, the truncated hit
+#: Gaussian's normaliser eta is 1 to double precision (1 - ndtr(8) < 1e-15).
+_ETA_SIGMAS = 8
+#: Expected ranges below this fraction of max_range are raised to it (a ray cast from inside or against an
+#: obstacle reads 0, where the short-reading density 1 / (1 - exp(-lambda z*)) divides by zero).
+_Z_FLOOR = 1e-3
+#: Probabilities handed to the inverse normal CDF are clipped into [_TINY_P, _BELOW_ONE], where it is finite.
+_TINY_P, _BELOW_ONE = 1e-300, 1 - 1e-16
 
 
 # ------------------------------------------------------------------ helpers
-def _positive(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number; got {value!r}") from None
-    if not np.isfinite(v) or v <= 0:
-        raise ValueError(f"{name} must be positive and finite; got {value!r}")
-    return v
-
-
 def _weights(names: tuple[str, ...], values: tuple[float, ...], tol: float = 1e-6) -> NDArray[np.float64]:
     w = np.array([float(v) for v in values])
     for n, v in zip(names, w):
@@ -94,11 +102,7 @@ def sensor_poses(poses: ArrayLike, sensor_offset: ArrayLike = (0.0, 0.0, 0.0)) -
     >>> sensor_poses([[1.0, 2.0, np.pi / 2]], (0.25, 0.0, 0.0)).round(6)
     array([[1.      , 2.25    , 1.570796]])
     """
-    p = as_poses(poses, "poses")
-    if p.ndim == 1:
-        p = p[None, :]
-    if p.ndim != 2:
-        raise ValueError(f"poses must be an (N, 3) array of robot poses; got shape {p.shape}")
+    p = check_sensor_poses(poses)
     o = _offset(sensor_offset)
     if not o.any():
         return p
@@ -160,14 +164,19 @@ def select_beams(n_beams: int, max_beams: int | None) -> NDArray[np.intp]:
     return np.round(np.linspace(0, n - 1, m)).astype(np.intp)
 
 
-def _check_rng(rng) -> np.random.Generator:
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
-    return rng
+def _scan_beams(ranges: ArrayLike, angles: ArrayLike, max_range: float,
+                max_beams: int | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A scan's checked readings and angles, thinned to ``max_beams`` (:func:`select_beams`)."""
+    a = check_angles(angles)
+    z = check_ranges(ranges, max_range)
+    if z.ndim != 1 or z.shape != a.shape:
+        raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
+    sel = select_beams(a.size, max_beams)
+    return z[sel], a[sel]
 
 
 def _check_temper(temper: float) -> float:
-    t = float(temper)
+    t = check_number(temper, "temper")
     if not 0.0 < t <= 1.0:
         raise ValueError(f"temper must lie in (0, 1] (1 = plain product of beams); got {temper!r}")
     return t
@@ -240,18 +249,18 @@ class BeamModel:
                  *, sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
                  temper: float = 1.0, method: str = "lut", n_bins: int | None = None,
                  caster: RayCaster | None = None) -> None:
-        self.grid = None if grid is None else _check_grid(grid)
-        self.max_range = _check_max_range(max_range)
+        self.grid = None if grid is None else check_grid(grid)
+        self.max_range = check_max_range(max_range)
         w = _weights(("z_hit", "z_short", "z_max", "z_rand"), (z_hit, z_short, z_max, z_rand))
         self.z_hit, self.z_short, self.z_max, self.z_rand = (float(v) for v in w)
-        self.sigma_hit = _positive("sigma_hit", sigma_hit)
-        self.lambda_short = _positive("lambda_short", lambda_short)
+        self.sigma_hit = check_positive(sigma_hit, "sigma_hit", "metres")
+        self.lambda_short = check_positive(lambda_short, "lambda_short")
         self.sensor_offset = _offset(sensor_offset)
         if max_beams is not None and int(max_beams) < 1:
             raise ValueError(f"max_beams must be >= 1 or None; got {max_beams}")
         self.max_beams = None if max_beams is None else int(max_beams)
         self.temper = _check_temper(temper)
-        self.z_floor = 1e-3 * self.max_range
+        self.z_floor = _Z_FLOOR * self.max_range
         if caster is not None:
             if not isinstance(caster, RayCaster):
                 raise TypeError(f"caster must be a localize.raycast.RayCaster; got {type(caster).__name__}")
@@ -336,14 +345,14 @@ class BeamModel:
         zs = np.maximum(zs.astype(dt, copy=False), dt(self.z_floor))
         z = np.asarray(z, dtype=dt)
         sig, lam, zmax = self.sigma_hit, self.lambda_short, self.max_range
-        # hit: Gaussian; its truncation mass eta differs from 1 only within 8 sigma of 0 or max_range
+        # hit: Gaussian; its truncation mass eta differs from 1 only within _ETA_SIGMAS sigma of 0 or max_range
         d = z - zs
         d *= dt(1.0 / sig)
         d *= d
         d *= dt(-0.5)
         g = np.exp(d)
         g *= dt(self.z_hit / (sig * _SQRT2PI))
-        edge = (zs < 8 * sig) | (zs > zmax - 8 * sig)
+        edge = (zs < _ETA_SIGMAS * sig) | (zs > zmax - _ETA_SIGMAS * sig)
         if edge.any():
             ze = zs[edge].astype(float)
             eta = ndtr((zmax - ze) / sig) - ndtr(-ze / sig)
@@ -374,12 +383,7 @@ class BeamModel:
 
     # ---------------------------------------------------------------- scans
     def _prepare(self, ranges: ArrayLike, angles: ArrayLike):
-        a = _check_angles(angles)
-        z = check_ranges(ranges, self.max_range)
-        if z.ndim != 1 or z.shape != a.shape:
-            raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
-        sel = select_beams(a.size, self.max_beams)
-        return z[sel], a[sel]
+        return _scan_beams(ranges, angles, self.max_range, self.max_beams)
 
     def expected(self, poses: ArrayLike, angles: ArrayLike, dtype: type = np.float64) -> NDArray:
         """Ray-cast expected ranges ``(N, B)`` for robot ``poses`` (the sensor offset applied).
@@ -471,13 +475,13 @@ class BeamModel:
         >>> round(float(np.mean(z == 10.0)), 2), bool(z.min() >= 0)
         (0.05, True)
         """
-        rng = _check_rng(rng)
+        rng = check_rng(rng)
         zs = np.clip(np.asarray(expected, dtype=float), self.z_floor, self.max_range)
         zmax, sig, lam = self.max_range, self.sigma_hit, self.lambda_short
         k = rng.choice(4, size=zs.shape, p=[self.z_hit, self.z_short, self.z_max, self.z_rand])
         u = rng.random(zs.shape)
         lo, hi = ndtr(-zs / sig), ndtr((zmax - zs) / sig)
-        hit = zs + sig * ndtri(np.clip(lo + u * (hi - lo), 1e-300, 1 - 1e-16))
+        hit = zs + sig * ndtri(np.clip(lo + u * (hi - lo), _TINY_P, _BELOW_ONE))
         short = -np.log1p(u * np.expm1(-lam * zs)) / lam
         rand = u * zmax
         z = np.choose(k, [hit, short, np.full(zs.shape, zmax), rand])
@@ -494,7 +498,7 @@ class BeamModel:
         >>> z.shape, bool(np.all((0 <= z) & (z <= 8.0)))
         ((1, 5), True)
         """
-        rng = _check_rng(rng)
+        rng = check_rng(rng)
         return self.sample_expected(self.expected(poses, angles), rng)
 
 
@@ -569,21 +573,21 @@ class LikelihoodField:
                  temper: float = 1.0, min_range: float = 0.0, unknown_is_obstacle: bool | None = None,
                  unknown_neutral: bool = True) -> None:
         self.unknown_neutral = bool(unknown_neutral)
-        grid = _check_grid(grid)
+        grid = check_grid(grid)
         if unknown_is_obstacle is not None and bool(unknown_is_obstacle) != grid.unknown_is_obstacle:
             grid = OccupancyGrid(grid.data, grid.resolution, origin=grid.origin,
                                  occupied_threshold=grid.occupied_threshold,
                                  unknown_is_obstacle=bool(unknown_is_obstacle))
         self.grid = grid
-        self.max_range = _check_max_range(max_range)
+        self.max_range = check_max_range(max_range)
         mn = float(min_range)
         if not (np.isfinite(mn) and 0.0 <= mn < self.max_range):
             raise ValueError(f"min_range must lie in [0, max_range = {self.max_range:g}) metres; got {min_range!r}")
         self.min_range = mn
         w = _weights(("z_hit", "z_rand"), (z_hit, z_rand))
         self.z_hit, self.z_rand = float(w[0]), float(w[1])
-        self.sigma_hit = _positive("sigma_hit", sigma_hit)
-        self.max_dist = 4.0 * self.sigma_hit if max_dist is None else _positive("max_dist", max_dist)
+        self.sigma_hit = check_positive(sigma_hit, "sigma_hit", "metres")
+        self.max_dist = 4.0 * self.sigma_hit if max_dist is None else check_positive(max_dist, "max_dist", "metres")
         self.sensor_offset = _offset(sensor_offset)
         if max_beams is not None and int(max_beams) < 1:
             raise ValueError(f"max_beams must be >= 1 or None; got {max_beams}")
@@ -682,12 +686,7 @@ class LikelihoodField:
         return out
 
     def _prepare(self, ranges: ArrayLike, angles: ArrayLike):
-        a = _check_angles(angles)
-        z = check_ranges(ranges, self.max_range)
-        if z.ndim != 1 or z.shape != a.shape:
-            raise ValueError(f"ranges and angles must be 1-D arrays of the same length; got {z.shape} and {a.shape}")
-        sel = select_beams(a.size, self.max_beams)
-        z, a = z[sel], a[sel]
+        z, a = _scan_beams(ranges, angles, self.max_range, self.max_beams)
         keep = (z < self.max_range) & (z > self.min_range)
         return z[keep], a[keep]
 
@@ -756,8 +755,8 @@ class LikelihoodField:
         >>> lf.sample([[6.0, 5.5, 0.0]], np.linspace(-1, 1, 4), np.random.default_rng(0)).shape
         (1, 4)
         """
-        rng = _check_rng(rng)
-        a = _check_angles(angles)
+        rng = check_rng(rng)
+        a = check_angles(angles)
         zs = RayCaster(self.grid, self.max_range, method=method).cast(sensor_poses(poses, self.sensor_offset), a)
         z = zs + rng.normal(0.0, self.sigma_hit, zs.shape)
         rand = rng.random(zs.shape) < self.z_rand
@@ -767,6 +766,60 @@ class LikelihoodField:
 
 
 # ----------------------------------------------------------- landmark model
+#: A robot nearer than this (metres) to a landmark stands on it: the bearing,
+#: and so the measurement Jacobian, is undefined there (the EKF skips such a
+#: sighting; :meth:`LandmarkModel.jacobian` raises).
+ON_LANDMARK = 1e-9
+
+
+def range_bearing(poses: ArrayLike, landmarks: ArrayLike) -> NDArray[np.float64]:
+    """The landmark model's noise-free measurement ``h(x, m)``: ``(range, bearing)`` (PR eq. 6.40).
+
+    ``poses (..., 3)`` and ``landmarks (..., 2)`` broadcast against each
+    other; the result has shape ``(..., 2)``, bearings relative to the
+    heading in ``[-pi, pi)``. Unchecked (the inner loop of the EKF and the UKF);
+    :meth:`LandmarkModel.expected` and :func:`localize.ekf.landmark_measurement`
+    check their input and call it.
+
+    Examples
+    --------
+    >>> range_bearing([0.0, 0.0, np.pi / 2], [3.0, 4.0]).round(6)
+    array([ 5.      , -0.643501])
+    """
+    p, m = np.asarray(poses, dtype=float), np.asarray(landmarks, dtype=float)
+    dx, dy = m[..., 0] - p[..., 0], m[..., 1] - p[..., 1]
+    b = wrap_angle(np.arctan2(dy, dx) - p[..., 2])
+    return np.stack(np.broadcast_arrays(np.hypot(dx, dy), b), axis=-1)
+
+
+def range_bearing_jacobian(poses: ArrayLike, landmarks: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Jacobian ``H = dh/dx`` of :func:`range_bearing` and where it is undefined (PR eq. 7.14).
+
+    ``H = [[-dx/r, -dy/r, 0], [dy/q, -dx/q, -1]]`` with ``(dx, dy)`` from the
+    robot to the landmark and ``q = r**2``; shape ``(..., 2, 3)``. The second
+    result is ``True`` where the robot stands on the landmark (``r <``
+    :data:`ON_LANDMARK`); ``H`` is finite there but meaningless. Unchecked.
+
+    Examples
+    --------
+    >>> H, on = range_bearing_jacobian([0.0, 0.0, 0.0], [[3.0, 4.0], [0.0, 0.0]])
+    >>> H[0].round(4), on.tolist()
+    (array([[-0.6 , -0.8 ,  0.  ],
+           [ 0.16, -0.12, -1.  ]]), [False, True])
+    """
+    p, m = np.asarray(poses, dtype=float), np.asarray(landmarks, dtype=float)
+    dx, dy = m[..., 0] - p[..., 0], m[..., 1] - p[..., 1]
+    q = dx * dx + dy * dy
+    on = q < ON_LANDMARK ** 2
+    q = np.where(on, 1.0, q)
+    r = np.sqrt(q)
+    H = np.zeros(np.shape(q) + (2, 3))
+    H[..., 0, 0], H[..., 0, 1] = -dx / r, -dy / r
+    H[..., 1, 0], H[..., 1, 1], H[..., 1, 2] = dy / q, -dx / q, -1.0
+    return H, on
+
+
+
 class LandmarkModel:
     """Range and bearing to identified point landmarks (PR section 6.6, table 6.4).
 
@@ -804,8 +857,8 @@ class LandmarkModel:
             raise ValueError("landmarks must be finite")
         lm.setflags(write=False)
         self.landmarks = lm
-        self.sigma_range = _positive("sigma_range", sigma_range)
-        self.sigma_bearing = _positive("sigma_bearing", sigma_bearing)
+        self.sigma_range = check_positive(sigma_range, "sigma_range", "metres")
+        self.sigma_bearing = check_positive(sigma_bearing, "sigma_bearing", "radians")
 
     def __repr__(self) -> str:
         return (f"LandmarkModel({len(self.landmarks)} landmarks, sigma_range={self.sigma_range:g}, "
@@ -838,15 +891,8 @@ class LandmarkModel:
         >>> LandmarkModel([[1.0, 1.0]], 0.1, 0.1).expected([0.0, 0.0, np.pi / 2]).round(4)
         array([[[ 1.4142, -0.7854]]])
         """
-        p = as_poses(poses, "poses")
-        if p.ndim == 1:
-            p = p[None, :]
-        m = self.landmarks[self._ids(ids)]
-        dx = m[None, :, 0] - p[:, None, 0]
-        dy = m[None, :, 1] - p[:, None, 1]
-        r = np.hypot(dx, dy)
-        b = wrap_angle(np.arctan2(dy, dx) - p[:, None, 2])
-        return np.stack([r, np.asarray(b).reshape(r.shape)], axis=-1)
+        p = check_sensor_poses(poses)
+        return range_bearing(p[:, None, :], self.landmarks[self._ids(ids)][None])
 
     def log_likelihood(self, poses: ArrayLike, z: ArrayLike, ids: ArrayLike) -> NDArray[np.float64]:
         """Log-likelihood ``(N,)`` of sightings ``z`` ``(K, 2)`` of landmarks ``ids`` ``(K,)``.
@@ -869,9 +915,7 @@ class LandmarkModel:
             raise ValueError("z must be finite (range, bearing) pairs")
         if (zz[:, 0] < 0).any():
             raise ValueError("measured ranges in z must be >= 0")
-        p = as_poses(poses, "poses")
-        if p.ndim == 1:
-            p = p[None, :]
+        p = check_sensor_poses(poses)
         if k.size == 0:
             return np.zeros(p.shape[0])
         e = self.expected(p, k)
@@ -889,7 +933,7 @@ class LandmarkModel:
         >>> lm.sample([0.0, 0.0, 0.0], np.random.default_rng(0)).shape
         (2, 2)
         """
-        rng = _check_rng(rng)
+        rng = check_rng(rng)
         p = as_poses(pose, "pose").reshape(-1, 3)
         if p.shape[0] != 1:
             raise ValueError(f"pose must be a single (x, y, theta); got shape {np.shape(pose)}")
@@ -905,7 +949,7 @@ class LandmarkModel:
 
         ``H = [[-dx/r, -dy/r, 0], [dy/r^2, -dx/r^2, -1]]`` with
         ``(dx, dy)`` from the robot to the landmark. Raises ``ValueError``
-        when the robot sits on the landmark (``r = 0``).
+        when the robot stands on the landmark (``r <`` :data:`ON_LANDMARK`).
 
         Examples
         --------
@@ -918,9 +962,8 @@ class LandmarkModel:
         if p.shape != (3,):
             raise ValueError(f"pose must be a single (x, y, theta); got shape {np.shape(pose)}")
         k = int(self._ids([int(landmark_id)])[0])
-        dx, dy = self.landmarks[k] - p[:2]
-        q = dx * dx + dy * dy
-        if q == 0:
-            raise ValueError(f"the pose coincides with landmark {k}: the bearing is undefined")
-        r = math.sqrt(q)
-        return np.array([[-dx / r, -dy / r, 0.0], [dy / q, -dx / q, -1.0]])
+        H, on = range_bearing_jacobian(p, self.landmarks[k])
+        if on:
+            raise ValueError(f"pose {p.tolist()} coincides with landmark {k} at {self.landmarks[k].tolist()} "
+                             f"(nearer than ON_LANDMARK = {ON_LANDMARK:g} m): the bearing is undefined")
+        return H

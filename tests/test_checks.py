@@ -59,3 +59,47 @@ def test_check_poses_rejects_non_finite_values():
     p[1, 1] = np.nan
     with pytest.raises(ValueError, match="NaN or infinite"):
         check_poses(p)
+
+
+# --- one wording across the package: the same bad argument gets the same message wherever it is passed
+def test_rng_is_checked_with_one_message_everywhere():
+    from localize import maps, sensors
+    from localize.grid import OccupancyGrid
+    from localize.multiscale import simulate_readings
+
+    g = OccupancyGrid.from_ascii("#####\n#...#\n#####", resolution=1.0)
+    calls = [lambda: g.sample_free(3, 0), lambda: maps.random_rooms((10, 10), 0.1, 0),
+             lambda: maps.city_world((2, 2), 3, 0),
+             lambda: simulate_readings(np.zeros((2, 2)), [[0]], 2, (0, 0), [], 0),
+             lambda: sensors.BeamModel(None, 5.0).sample_expected([1.0], 0),
+             lambda: sensors.LandmarkModel([[1.0, 1.0]], 0.1, 0.1).sample([0, 0, 0], 0)]
+    for call in calls:
+        with pytest.raises(TypeError, match=r"^rng must be a numpy.random.Generator, e.g. np.random.default_rng\(seed\); "
+                                            r"got int$"):
+            call()
+
+
+def test_positive_numbers_are_checked_with_one_message_everywhere():
+    from localize.ekf import EKFLocalizer
+    from localize.grid import OccupancyGrid
+    from localize.sensors import BeamModel, LandmarkModel
+
+    for call, name in [(lambda: BeamModel(None, 5.0, sigma_hit=0.0), "sigma_hit"),
+                       (lambda: LandmarkModel([[0, 0]], -1.0, 0.1), "sigma_range"),
+                       (lambda: EKFLocalizer([[0, 0]], 0.1, 0.0, [0] * 6), "sigma_bearing"),
+                       (lambda: EKFLocalizer([[0, 0]], 0.1, 0.1, [0] * 6, dt=0), "dt"),
+                       (lambda: OccupancyGrid(np.zeros((2, 2)), -0.5), "resolution")]:
+        with pytest.raises(ValueError, match=rf"^{name} must be a finite number (of [a-z ]+ )?> 0; got "):
+            call()
+
+
+def test_check_alphas():
+    from localize._checks import check_alphas
+
+    assert check_alphas((0, 0.1), 2).dtype == float
+    with pytest.raises(ValueError, match=r"alphas must hold 6 numbers \(alpha1..alpha6\)"):
+        check_alphas([0.1] * 4, 6)
+    with pytest.raises(ValueError, match="must be >= 0"):
+        check_alphas([0.1, -0.1], 2)
+    with pytest.raises(ValueError, match="must be finite"):
+        check_alphas([0.1, np.nan], 2)

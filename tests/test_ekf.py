@@ -256,3 +256,34 @@ def test_vectorised_association_equals_the_loop(rng):
     for _ in range(20):
         z = np.column_stack([rng.uniform(0.5, 9, 6), rng.uniform(-np.pi, np.pi, 6)])
         assert f.associate(z).tolist() == f.associate_loop(z).tolist()
+
+
+def test_ekf_and_landmark_model_share_the_zero_distance_test():
+    """One on-the-landmark test (``r < ON_LANDMARK``) for the EKF and the landmark model.
+
+    Nearer than a nanometre both raise; a micrometre away both give the same
+    (huge but finite) Jacobian; the EKF skips a sighting taken on the landmark.
+    """
+    from localize.sensors import ON_LANDMARK, LandmarkModel
+
+    model = LandmarkModel(LMS, 0.1, 0.05)
+    for d in (0.0, 0.1 * ON_LANDMARK):
+        pose = [LMS[0][0] + d, LMS[0][1], 0.0]
+        with pytest.raises(ValueError, match="coincides"):
+            landmark_jacobian(pose, LMS[0])
+        with pytest.raises(ValueError, match="coincides"):
+            model.jacobian(pose, 0)
+    pose = [LMS[0][0] + 1e-6, LMS[0][1], 0.0]
+    np.testing.assert_array_equal(landmark_jacobian(pose, LMS[0]), model.jacobian(pose, 0))
+    f = EKFLocalizer(LMS, 0.1, 0.05, [0.01] * 6, mean=[LMS[0][0], LMS[0][1], 0.0], cov=np.eye(3) * 0.1)
+    before = f.cov
+    f.update([[0.0, 0.3]], ids=[0])
+    np.testing.assert_array_equal(f.cov, before)
+    assert f.model is not None and f.R1.tolist() == model.R.tolist()
+
+
+def test_associate_skips_a_landmark_under_the_robot_like_its_oracle():
+    f = EKFLocalizer(LMS, 0.1, 0.05, [0.01] * 6, mean=[LMS[1][0], LMS[1][1], 0.2], cov=np.eye(3) * 0.05)
+    z = [[0.0, 0.0], [float(np.hypot(*np.subtract(LMS[0], LMS[1]))), 0.0]]
+    assert f.associate(z).tolist() == f.associate_loop(z).tolist()
+    assert 1 not in f.associate(z).tolist()

@@ -144,3 +144,41 @@ def test_wrap_angle_vectorised_equals_scalar(a):
     w = wrap_angle(a)
     assert np.all(w >= -np.pi) and np.all(w < np.pi)
     np.testing.assert_array_equal(w, [wrap_angle(float(x)) for x in a])
+
+
+# --- exact=True against the bare formula (exact=False): why the exact wrap is the default
+_NEAR_PI = np.nextafter(np.pi, 0.0)      # the largest float inside [-pi, pi)
+
+
+def test_wrap_angle_exact_keeps_headings_inside_and_bins_in_range():
+    """The bare formula moves an angle one ulp below +pi to about -pi and can return +pi itself.
+
+    That matters wherever a wrapped heading is stored and compared: wrapping an
+    already wrapped heading must change nothing (a pose that is re-wrapped by
+    every step must not jump a turn), and ``+pi`` must never appear (the
+    interval is half-open, so that ``+pi`` and ``-pi`` are not two headings).
+    The exact wrap (the default) guarantees both; the bare formula does not.
+    """
+    edge = np.array([_NEAR_PI, -np.pi, np.pi, np.nextafter(-np.pi, -4.0), 3 * np.pi, -1e-300])
+    exact, bare = wrap_angle(edge), wrap_angle(edge, exact=False)
+    assert exact[0] == _NEAR_PI and wrap_angle(_NEAR_PI) == _NEAR_PI          # inside: untouched
+    assert abs(bare[0] - _NEAR_PI) > 6.0                                      # bare: jumped a turn
+    assert np.all((exact >= -np.pi) & (exact < np.pi))
+    assert np.any((bare >= np.pi) | (bare < -np.pi))                          # bare: outside somewhere
+    np.testing.assert_array_equal(wrap_angle(exact), exact)                   # idempotent
+
+
+@given(arrays(np.float64, st.integers(1, 50), elements=st.floats(-1e4, 1e4)))
+def test_wrap_angle_bare_formula_agrees_away_from_the_ends(a):
+    """Inside a density or a cosine either variant serves: they differ only at the ends."""
+    exact, bare = wrap_angle(a), wrap_angle(a, exact=False)
+    away = np.abs(np.abs(exact) - np.pi) > 1e-9
+    np.testing.assert_array_equal(exact[away], bare[away])
+    np.testing.assert_allclose(np.cos(exact), np.cos(bare), atol=1e-12)
+    assert wrap_angle(float(a[0]), exact=False) == pytest.approx(float(bare[0]), abs=1e-12)
+
+
+def test_wrap_angle_scalar_and_array_paths_agree_at_the_ends():
+    edge = [_NEAR_PI, -np.pi, np.pi, np.nextafter(-np.pi, -4.0), 3 * np.pi, -3 * np.pi, 1e10, -1e-300]
+    np.testing.assert_array_equal(wrap_angle(np.array(edge)), [wrap_angle(x) for x in edge])
+    assert np.isnan(wrap_angle(np.inf)) and np.isnan(wrap_angle(np.nan))

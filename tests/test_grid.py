@@ -161,10 +161,9 @@ def test_sample_free_errors():
     [
         (dict(data=np.zeros(5), resolution=1.0), "2-D array"),
         (dict(data=np.zeros((0, 3)), resolution=1.0), "at least one row"),
-        (dict(data=np.zeros((2, 2)), resolution=0.0), "resolution must be a positive"),
-        (dict(data=np.zeros((2, 2)), resolution=-0.1), "resolution must be a positive"),
-        (dict(data=np.zeros((2, 2)), resolution="big"), "resolution must be a positive"),
-        (dict(data=np.zeros((2, 2)), resolution=np.nan), "resolution must be a positive"),
+        (dict(data=np.zeros((2, 2)), resolution=0.0), r"resolution must be a finite number of metres per cell > 0"),
+        (dict(data=np.zeros((2, 2)), resolution=-0.1), r"resolution must be a finite number of metres per cell > 0"),
+        (dict(data=np.zeros((2, 2)), resolution=np.nan), "resolution must be finite"),
         (dict(data=[[0.0, 1.5]], resolution=1.0), r"\[0, 1\].*1\.5.*row 0, column 1"),
         (dict(data=[[0.0, -0.2]], resolution=1.0), r"\[0, 1\]"),
         (dict(data=[[0.0, np.inf]], resolution=1.0), "infinite"),
@@ -176,6 +175,11 @@ def test_sample_free_errors():
 def test_rejects_bad_input(kwargs, match):
     with pytest.raises(ValueError, match=match):
         OccupancyGrid(**kwargs)
+
+
+def test_rejects_a_resolution_that_is_not_a_number():
+    with pytest.raises(TypeError, match="resolution must be a number of metres per cell; got 'big'"):
+        OccupancyGrid(np.zeros((2, 2)), "big")
 
 
 def test_nan_is_the_unknown_marker():

@@ -8,19 +8,12 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from localize import resample as rs
+from localize.diagnostics import AlmostOne
 
 FAST = [rs.multinomial, rs.stratified, rs.systematic, rs.residual]
 LOOP = [rs.multinomial_loop, rs.stratified_loop, rs.systematic_loop, rs.residual_loop]
 ALL = FAST + LOOP
 W4 = np.array([0.5, 0.3, 0.15, 0.05])
-
-
-class AlmostOne(np.random.Generator):
-    """A generator whose uniforms are the largest double below 1: the worst case for rounding."""
-
-    def random(self, size=None, dtype=np.float64, out=None):
-        v = np.nextafter(1.0, 0.0)
-        return float(v) if size is None else np.full(size, v)
 
 
 def offspring_samples(fn, w, reps, rng, n=None):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._checks import check_positive
 from . import draw_poses, new_axes
 
 __all__ = [
@@ -24,6 +25,10 @@ __all__ = [
 
 #: One colour per filter, used by every figure of the chapter.
 FILTER_COLORS = {"EKF": "tab:blue", "UKF": "tab:green", "MCL": "tab:red", "truth": "black"}
+#: The NEES of a consistent filter averages the state's dimension, 3 for (x, y, theta).
+_NEES_EXPECTED = 3.0
+#: Average NEES below this is drawn at it, so that the log axis keeps a bottom.
+_NEES_FLOOR = 1e-2
 
 
 def covariance_ellipse(mean: ArrayLike, cov: ArrayLike, ax=None, n_std: float = 2.0, **kwargs):
@@ -43,8 +48,7 @@ def covariance_ellipse(mean: ArrayLike, cov: ArrayLike, ax=None, n_std: float = 
     _, ax = new_axes(ax)
     m = np.asarray(mean, dtype=float).reshape(-1)
     c = np.asarray(cov, dtype=float)[:2, :2]
-    if not (np.isfinite(n_std) and n_std > 0):
-        raise ValueError(f"n_std must be a positive number of standard deviations; got {n_std!r}")
+    check_positive(n_std, "n_std", "standard deviations")
     vals, vecs = np.linalg.eigh(0.5 * (c + c.T))
     vals = np.maximum(vals, 0.0)
     angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
@@ -180,12 +184,16 @@ def plot_errors(mc, ax=None, what: str = "position", band: tuple[float, float] =
         ax.plot(t, np.median(e, axis=0), color=col, label=name)
     if what == "position":
         ax.axhline(mc.fail_threshold, color="gray", ls="--", lw=1, label="failure threshold")
-        ax.set_ylabel("position error [m]")
-    else:
-        ax.set_ylabel("heading error [deg]")
+    return _per_step_axes(ax, "position error [m]" if what == "position" else "heading error [deg]",
+                          f"{mc.scenario.title}: median and {band[0]}-{band[1]}% band, {mc.n_seeds} seeds")
+
+
+def _per_step_axes(ax, ylabel: str, title: str):
+    """Label a per-step plot of the Monte Carlo runs: log y axis, steps along x, a small legend."""
     ax.set_yscale("log")
     ax.set_xlabel("step")
-    ax.set_title(f"{mc.scenario.title}: median and {band[0]}-{band[1]}% band, {mc.n_seeds} seeds", fontsize=9)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
     ax.legend(fontsize=7)
     return ax
 
@@ -201,12 +209,7 @@ def plot_nees(mc, ax=None):
     t = np.arange(mc.n_steps)
     lo, hi = mc.nees_bounds
     ax.axhspan(lo, hi, color="gray", alpha=0.2, label="95% band (consistent)")
-    ax.axhline(3.0, color="gray", lw=0.8)
+    ax.axhline(_NEES_EXPECTED, color="gray", lw=0.8)
     for name, m in mc.metrics.items():
-        ax.plot(t, np.maximum(m.nees.mean(axis=0), 1e-2), color=FILTER_COLORS.get(name), label=name)
-    ax.set_yscale("log")
-    ax.set_xlabel("step")
-    ax.set_ylabel("average NEES")
-    ax.set_title(f"{mc.scenario.title}: NEES, {mc.n_seeds} seeds", fontsize=9)
-    ax.legend(fontsize=7)
-    return ax
+        ax.plot(t, np.maximum(m.nees.mean(axis=0), _NEES_FLOOR), color=FILTER_COLORS.get(name), label=name)
+    return _per_step_axes(ax, "average NEES", f"{mc.scenario.title}: NEES, {mc.n_seeds} seeds")

@@ -9,7 +9,10 @@ widgets in one chapter never redraw each other's figure.
 
 from __future__ import annotations
 
-__all__ = ["HINT", "with_hint"]
+import contextlib
+import io
+
+__all__ = ["HINT", "with_hint", "interactive_app", "slider", "quiet_outside_ipython"]
 
 #: What a reader sees in place of a widget before the notebook has been run
 #: (an untrusted or not yet executed notebook can only show the plain-text form).
@@ -66,3 +69,60 @@ def _full_labels(widget) -> None:
         if getattr(wd, "description", "") and style is not None and hasattr(style, "description_width"):
             style.description_width = "initial"
         stack.extend(getattr(wd, "children", ()))
+
+
+@contextlib.contextmanager
+def quiet_outside_ipython():
+    """Swallow what ipywidgets prints to a terminal while a widget is built and first drawn.
+
+    Outside IPython (a script, a doctest, a test) each redraw's
+    ``clear_output`` writes clear-line control codes to stdout; a notebook
+    prints nothing there, so inside IPython this does nothing.
+    """
+    try:
+        from IPython import get_ipython
+    except ImportError:  # pragma: no cover - IPython comes with ipywidgets
+        get_ipython = None
+    if get_ipython is not None and get_ipython() is not None:
+        yield
+        return
+    with contextlib.redirect_stdout(io.StringIO()):
+        yield
+
+
+def interactive_app(figure, hint: str = HINT, **controls):
+    """``figure`` redrawn by ``controls``: ``with_hint(ipywidgets.interactive(figure, **controls))``.
+
+    ``figure`` maps the controls' values (keyword arguments named like the
+    controls; ``ipywidgets.fixed`` for constants) to a matplotlib Figure, the
+    unit-tested callback of a widget module. Built quietly outside a notebook
+    (:func:`quiet_outside_ipython`).
+
+    Examples
+    --------
+    >>> import matplotlib.pyplot as plt
+    >>> def figure(a=1.0):
+    ...     fig, ax = plt.subplots(); ax.plot([0, a]); return fig
+    >>> app = interactive_app(figure, a=slider(1.0, 0.0, 2.0, 0.5, "a"))
+    >>> [c.description for c in app.children[:1]], app.children[0].continuous_update
+    (['a'], False)
+    >>> plt.close("all")
+    """
+    from ipywidgets import interactive
+
+    with quiet_outside_ipython():
+        return with_hint(interactive(figure, **controls), hint)
+
+
+def slider(value: float, lo: float, hi: float, step: float, description: str, fmt: str = ".2f", log: bool = False):
+    """A float slider that redraws on release (``continuous_update=False``), its readout in ``fmt``.
+
+    ``log=True`` gives a ``FloatLogSlider`` whose ``lo``, ``hi`` and ``step``
+    are powers of ten.
+    """
+    import ipywidgets as W
+
+    kind = W.FloatLogSlider if log else W.FloatSlider
+    extra = {"base": 10} if log else {}
+    return kind(value=value, min=lo, max=hi, step=step, description=description, readout_format=fmt,
+                continuous_update=False, **extra)

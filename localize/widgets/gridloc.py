@@ -18,7 +18,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from . import with_hint
+from . import interactive_app
 
 __all__ = ["CELL_SIZES", "HEADING_BINS", "chapter_run", "grid_run", "grid_resolution_figure",
            "grid_resolution_widget", "DEMOS", "DEMO_VARIANTS"]
@@ -160,23 +160,19 @@ def grid_resolution_widget(cell: float = 0.2, n_headings: int = 36):
 
     Examples
     --------
-    >>> import contextlib, io
-    >>> with contextlib.redirect_stdout(io.StringIO()):   # outside a notebook the widget prints codes
-    ...     wid = grid_resolution_widget(0.5, 12)
+    >>> wid = grid_resolution_widget(0.5, 12)
     >>> [c.description for c in wid.children[:2]]
     ['cell size [m]', 'heading bins']
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
     import ipywidgets as W
 
-    style = {"description_width": "initial"}
-    return with_hint(W.interactive(
+    return interactive_app(
         grid_resolution_figure,
-        cell=W.ToggleButtons(options=list(CELL_SIZES), value=float(cell), description="cell size [m]", style=style),
-        n_headings=W.ToggleButtons(options=list(HEADING_BINS), value=int(n_headings), description="heading bins",
-                                   style=style),
+        cell=W.ToggleButtons(options=list(CELL_SIZES), value=float(cell), description="cell size [m]"),
+        n_headings=W.ToggleButtons(options=list(HEADING_BINS), value=int(n_headings), description="heading bins"),
         figsize=W.fixed((11, 3.8)),
-    ))
+    )
 
 
 #: Zero-argument demos returning the widget's default figure (see tests/test_widgets_common.py).

@@ -20,7 +20,7 @@ from .. import discrete
 from .. import histogram as hist
 from ..maps import hallway, tile_world
 from ..plot.histogram import draw_bars, draw_tiles
-from . import with_hint
+from . import interactive_app, with_hint
 
 __all__ = ["hallway_run", "hallway_figure", "tile_world_run", "tile_world_figure", "hallway_app",
            "tile_world_app", "TILE_START", "TILE_PATH", "DEMOS", "DEMO_VARIANTS"]
@@ -165,28 +165,26 @@ def hallway_app():
 
     Examples
     --------
-    >>> import contextlib, io
-    >>> with contextlib.redirect_stdout(io.StringIO()):   # outside Jupyter the widget prints control codes
-    ...     app = hallway_app()
+    >>> app = hallway_app()
     >>> [c.description for c in app.children[:4]]
     ['sensor right', 'motion noise', 'cycles', 'cyclic world']
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
     import matplotlib.pyplot as plt
-    from ipywidgets import Checkbox, FloatSlider, IntSlider, interactive
+    from ipywidgets import Checkbox, FloatSlider, IntSlider
 
     def show(p_hit, motion_noise, n_steps, cyclic):
         fig = hallway_figure(p_hit, motion_noise, n_steps, cyclic)
         plt.show()
         plt.close(fig)
 
-    return with_hint(interactive(
+    return interactive_app(
         show,
         p_hit=FloatSlider(value=0.75, min=0.5, max=1.0, step=0.05, description="sensor right"),
         motion_noise=FloatSlider(value=0.2, min=0.0, max=0.9, step=0.05, description="motion noise"),
         n_steps=IntSlider(value=3, min=1, max=20, description="cycles"),
         cyclic=Checkbox(value=True, description="cyclic world"),
-    ))
+    )
 
 
 class _TileStepper:

@@ -21,7 +21,7 @@ from ..mcl import MCL, OdometryMotion, run_mcl
 from ..metrics import heading_error, position_error
 from ..plot import draw_map, draw_robot
 from ..plot.mcl import draw_particles
-from . import with_hint
+from . import quiet_outside_ipython, with_hint
 
 __all__ = ["simulate", "mcl_run_figure", "mcl_widget_figure", "mcl_player", "DEMOS", "DEMO_VARIANTS"]
 
@@ -181,10 +181,8 @@ def mcl_player(n_steps: int = 40, **defaults: Any):
 
     Examples
     --------
-    >>> import contextlib, io
     >>> import matplotlib.pyplot as plt
-    >>> with contextlib.redirect_stdout(io.StringIO()):    # no frontend here: swallow the terminal codes
-    ...     w = mcl_player(n_steps=3, n_particles=200)
+    >>> w = mcl_player(n_steps=3, n_particles=200)
     >>> type(w).__name__, len(w.children)
     ('VBox', 2)
     >>> plt.close("all")
@@ -210,8 +208,9 @@ def mcl_player(n_steps: int = 40, **defaults: Any):
                           alpha_scale=alpha_scale, sigma_hit=sigma_hit, n_steps=n_steps)
         plt.show()
 
-    out = W.interactive_output(show, dict(step=step, n_particles=n_particles, resampler=resampler,
-                                          threshold=threshold, alpha_scale=alpha_scale, sigma_hit=sigma_hit))
+    with quiet_outside_ipython():
+        out = W.interactive_output(show, dict(step=step, n_particles=n_particles, resampler=resampler,
+                                              threshold=threshold, alpha_scale=alpha_scale, sigma_hit=sigma_hit))
     controls = W.VBox([W.HBox([play, step]), W.HBox([n_particles, resampler]),
                        W.HBox([threshold, alpha_scale, sigma_hit])])
     return with_hint(W.VBox([controls, out]))

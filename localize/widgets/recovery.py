@@ -21,7 +21,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from . import with_hint
+from . import quiet_outside_ipython, slider, with_hint
 
 __all__ = ["kidnap_trial", "kidnap_summary", "kidnap_figure", "kidnap_widget", "DEMOS", "DEMO_VARIANTS"]
 
@@ -171,9 +171,7 @@ def kidnap_widget(**defaults):
 
     Examples
     --------
-    >>> import contextlib, io
-    >>> with contextlib.redirect_stdout(io.StringIO()):   # outside a notebook the widget prints codes
-    ...     wid = kidnap_widget(n_particles=200)
+    >>> wid = kidnap_widget(n_particles=200)
     >>> [c.description for c in wid.children[:3]]
     ['augmented MCL', 'alpha_slow', 'alpha_fast']
     >>> import matplotlib.pyplot as plt; plt.close("all")
@@ -184,20 +182,15 @@ def kidnap_widget(**defaults):
     p = dict(alpha_slow=0.1, alpha_fast=0.5, temperature=1.0, injection=0.0, augmented=True, n_particles=1000,
              seed=2)
     p.update(defaults)
-    kw = dict(continuous_update=False, style={"description_width": "initial"})
     controls = dict(
         augmented=W.Checkbox(value=p["augmented"], description="augmented MCL"),
-        alpha_slow=W.FloatLogSlider(value=p["alpha_slow"], base=10, min=-2.5, max=-0.3, step=0.1,
-                                    description="alpha_slow", readout_format=".3f", **kw),
-        alpha_fast=W.FloatSlider(value=p["alpha_fast"], min=0.05, max=1.0, step=0.05, description="alpha_fast",
-                                 readout_format=".2f", **kw),
-        temperature=W.FloatLogSlider(value=p["temperature"], base=10, min=0, max=1.6, step=0.2,
-                                     description="temperature", readout_format=".1f", **kw),
-        injection=W.FloatSlider(value=p["injection"], min=0.0, max=0.2, step=0.01,
-                                description="fixed injection", readout_format=".2f", **kw),
+        alpha_slow=slider(p["alpha_slow"], -2.5, -0.3, 0.1, "alpha_slow", fmt=".3f", log=True),
+        alpha_fast=slider(p["alpha_fast"], 0.05, 1.0, 0.05, "alpha_fast"),
+        temperature=slider(p["temperature"], 0, 1.6, 0.2, "temperature", fmt=".1f", log=True),
+        injection=slider(p["injection"], 0.0, 0.2, 0.01, "fixed injection"),
         n_particles=W.Dropdown(options=sorted({300, 1000, 3000, int(p["n_particles"])}), value=int(p["n_particles"]),
                                description="particles"),
-        seed=W.IntSlider(value=p["seed"], min=0, max=9, description="robot (seed)", **kw),
+        seed=W.IntSlider(value=p["seed"], min=0, max=9, description="robot (seed)", continuous_update=False),
     )
 
     def show(**v):
@@ -208,7 +201,8 @@ def kidnap_widget(**defaults):
             return
         display(fig)
 
-    out = W.interactive_output(show, controls)
+    with quiet_outside_ipython():
+        out = W.interactive_output(show, controls)
     c = controls
     return with_hint(W.VBox([c["augmented"], c["alpha_slow"], c["alpha_fast"],
                              W.HBox([c["temperature"], c["injection"]]), W.HBox([c["n_particles"], c["seed"]]), out]))

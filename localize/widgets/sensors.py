@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 
 from ..grid import OccupancyGrid
 from ..sensors import BeamModel
-from . import with_hint
+from . import interactive_app, slider
 
 __all__ = ["normalise_weights", "pseudo_density_figure", "beam_density_widget", "pose_scan_figure",
            "pose_scan_widget", "pose_scan_start", "DEMOS", "DEMO_VARIANTS"]
@@ -79,21 +79,14 @@ def beam_density_widget(max_range: float = 10.0):
 
     Examples
     --------
-    >>> import contextlib, io
-    >>> with contextlib.redirect_stdout(io.StringIO()):   # outside a notebook the widget prints codes
-    ...     wid = beam_density_widget()
+    >>> wid = beam_density_widget()
     >>> [c.description for c in wid.children[:3]]
     ['z_hit', 'z_short', 'z_max']
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
     import ipywidgets as w
 
-    def slider(value, lo, hi, step, desc):
-        return w.FloatSlider(value=value, min=lo, max=hi, step=step, description=desc,
-                             continuous_update=False, readout_format=".2f",
-                             style={"description_width": "initial"})
-
-    return with_hint(w.interactive(
+    return interactive_app(
         pseudo_density_figure,
         z_hit=slider(0.7, 0.0, 1.0, 0.05, "z_hit"),
         z_short=slider(0.1, 0.0, 1.0, 0.05, "z_short"),
@@ -103,7 +96,7 @@ def beam_density_widget(max_range: float = 10.0):
         lambda_short=slider(0.5, 0.05, 3.0, 0.05, "lambda_short"),
         z_expected=slider(5.0, 0.5, max_range, 0.25, "z*"),
         max_range=w.fixed(float(max_range)),
-    ))
+    )
 
 
 def pose_scan_figure(grid: OccupancyGrid, model, angles: ArrayLike, measured: ArrayLike, x: float, y: float,
@@ -163,9 +156,7 @@ def pose_scan_widget(grid: OccupancyGrid, model, angles: ArrayLike, measured: Ar
     >>> from localize.maps import office
     >>> from localize.sensors import LikelihoodField
     >>> g = office()
-    >>> import contextlib, io
-    >>> with contextlib.redirect_stdout(io.StringIO()):   # outside a notebook the widget prints codes
-    ...     wid = pose_scan_widget(g, LikelihoodField(g, 8.0), [0.0], [1.0], start=(6.0, 5.5, 0.0))
+    >>> wid = pose_scan_widget(g, LikelihoodField(g, 8.0), [0.0], [1.0], start=(6.0, 5.5, 0.0))
     >>> [c.description for c in wid.children[:3]]
     ['x [m]', 'y [m]', 'heading [deg]']
     >>> [c.value for c in wid.children[:3]]              # on the slider steps: cell centres, whole degrees
@@ -176,19 +167,14 @@ def pose_scan_widget(grid: OccupancyGrid, model, angles: ArrayLike, measured: Ar
 
     (x0, x1, step), (y0, y1, _), (t0, t1, t_step) = _pose_slider_ranges(grid)
     x, y, theta_deg = pose_scan_start(grid, start)
-    style = {"description_width": "initial"}
-    return with_hint(w.interactive(
+    return interactive_app(
         pose_scan_figure,
         grid=w.fixed(grid), model=w.fixed(model), angles=w.fixed(np.asarray(angles)),
         measured=w.fixed(np.asarray(measured)), reference_pose=w.fixed(reference_pose),
-        x=w.FloatSlider(value=x, min=x0, max=x1, step=step, description="x [m]",
-                        continuous_update=False, readout_format=".2f", style=style),
-        y=w.FloatSlider(value=y, min=y0, max=y1, step=step, description="y [m]",
-                        continuous_update=False, readout_format=".2f", style=style),
-        theta_deg=w.FloatSlider(value=theta_deg, min=t0, max=t1, step=t_step,
-                                description="heading [deg]", continuous_update=False, readout_format=".0f",
-                                style=style),
-    ))
+        x=slider(x, x0, x1, step, "x [m]"),
+        y=slider(y, y0, y1, step, "y [m]"),
+        theta_deg=slider(theta_deg, t0, t1, t_step, "heading [deg]", fmt=".0f"),
+    )
 
 
 def _pose_slider_ranges(grid: OccupancyGrid):

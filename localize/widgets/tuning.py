@@ -22,7 +22,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import with_hint
+from . import interactive_app, slider
 
 __all__ = ["cluttered_scans", "sensor_model", "residual_correlation", "suggest_temper", "tuning_figure",
            "tuning_widget", "DEMOS", "DEMO_VARIANTS"]
@@ -210,25 +210,20 @@ def tuning_widget(temper: float = 0.1, sigma_hit: float = 0.2, kind: str = "like
 
     Examples
     --------
-    >>> import contextlib, io
-    >>> with contextlib.redirect_stdout(io.StringIO()):   # outside a notebook the widget prints codes
-    ...     wid = tuning_widget()
+    >>> wid = tuning_widget()
     >>> [c.description for c in wid.children[:3]]
     ['tempering γ', 'sigma_hit [m]', 'model']
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
     import ipywidgets as W
 
-    style = {"description_width": "initial"}
-    return with_hint(W.interactive(
+    return interactive_app(
         tuning_figure,
-        temper=W.FloatLogSlider(value=float(temper), base=10, min=-2.3, max=0, step=0.1, description="tempering γ",
-                                readout_format=".3f", continuous_update=False, style=style),
-        sigma_hit=W.FloatSlider(value=float(sigma_hit), min=0.05, max=0.5, step=0.05, description="sigma_hit [m]",
-                                readout_format=".2f", continuous_update=False, style=style),
-        kind=W.ToggleButtons(options=["likelihood_field", "beam"], value=kind, description="model", style=style),
+        temper=slider(float(temper), -2.3, 0, 0.1, "tempering γ", fmt=".3f", log=True),
+        sigma_hit=slider(float(sigma_hit), 0.05, 0.5, 0.05, "sigma_hit [m]"),
+        kind=W.ToggleButtons(options=["likelihood_field", "beam"], value=kind, description="model"),
         figsize=W.fixed((11, 4)),
-    ))
+    )
 
 
 #: Zero-argument demos returning the widget's default figure (see tests/test_widgets_common.py).
