@@ -58,7 +58,7 @@ from typing import Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._checks import check_nonnegative, check_number, check_positive, check_rng
+from ._checks import check_alphas, check_nonnegative, check_number, check_positive, check_rng
 from .geometry import as_poses, relative, wrap_angle
 
 __all__ = [
@@ -109,17 +109,6 @@ NoiseSpec = Union[str, Callable]
 # ----------------------------------------------------------------------------
 # validation helpers
 # ----------------------------------------------------------------------------
-
-def _check_alphas(alphas: ArrayLike, n: int) -> NDArray[np.float64]:
-    a = np.asarray(alphas, dtype=float)
-    if a.shape != (n,):
-        raise ValueError(f"alphas must hold {n} numbers (alpha1..alpha{n}); got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"alphas must be finite; got {a.tolist()}")
-    if np.any(a < 0):
-        raise ValueError(f"alphas must be >= 0 (they scale noise variances); got {a.tolist()}")
-    return a
-
 
 def _check_sign(sign: int) -> float:
     if sign not in (-1, 1):
@@ -205,7 +194,7 @@ def odometry_variances(rot1: ArrayLike, trans: ArrayLike, rot2: ArrayLike, alpha
     >>> [round(float(x), 6) for x in odometry_variances(0.1, 1.0, 0.0, [0.1, 0.01, 0.05, 0.1], "absolute")]
     [0.02, 0.06, 0.01]
     """
-    a1, a2, a3, a4 = (float(a) for a in _check_alphas(alphas, 4))
+    a1, a2, a3, a4 = (float(a) for a in check_alphas(alphas, 4))
     r1, t, r2 = (np.asarray(v, dtype=float) for v in (rot1, trans, rot2))
     if callable(noise):
         out = noise(r1, t, r2, np.array([a1, a2, a3, a4]))
@@ -240,7 +229,7 @@ def velocity_variances(v: ArrayLike, omega: ArrayLike, alphas: ArrayLike,
     >>> [round(float(x), 6) for x in velocity_variances(1.0, 0.5, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])]
     [0.15, 0.4, 0.65]
     """
-    a = _check_alphas(alphas, 6)
+    a = check_alphas(alphas, 6)
     v = np.asarray(v, dtype=float)
     w = np.asarray(omega, dtype=float)
     if callable(noise):
@@ -527,7 +516,7 @@ def forward_pdf_xy(xy: ArrayLike, prev_pose: ArrayLike, distance: float, sigma_d
 
 def _odometry_setup(u, alphas, noise, min_std, min_trans):
     prev_odom, odom = _odometry_pair(u)
-    alphas = _check_alphas(alphas, 4)
+    alphas = check_alphas(alphas, 4)
     min_std = check_nonnegative(min_std, "min_std")
     rot1, trans, rot2 = odometry_to_control(prev_odom, odom, min_trans)
     s1, st, s2 = _stds(odometry_variances(rot1, trans, rot2, alphas, noise), min_std, ("rot1", "trans", "rot2"))
@@ -782,7 +771,7 @@ def odometry_pdf_xy(xy: ArrayLike, u: ArrayLike, prev_pose: ArrayLike, alphas: A
 def _velocity_setup(u, dt, alphas, noise, min_std):
     v, w = _velocity_control(u)
     dt = check_positive(dt, "dt", "seconds")
-    alphas = _check_alphas(alphas, 6)
+    alphas = check_alphas(alphas, 6)
     min_std = check_nonnegative(min_std, "min_std")
     sv, sw, sg = _stds(velocity_variances(v, w, alphas, noise), min_std, ("v", "omega", "gamma"))
     return v, w, dt, (sv, sw, sg)
@@ -940,7 +929,7 @@ class OdometryMotion:
     """
 
     def __init__(self, alphas: ArrayLike = (0.005, 0.005, 0.01, 0.005), **options) -> None:
-        self.alphas = _check_alphas(alphas, 4)
+        self.alphas = check_alphas(alphas, 4)
         self.options = options          # passed on: noise=, min_std=, ... (see sample_odometry)
 
     def __call__(self, poses: NDArray[np.float64], u, rng: np.random.Generator) -> NDArray[np.float64]:
@@ -1006,7 +995,7 @@ class VelocityMotion:
     """
 
     def __init__(self, alphas: ArrayLike, dt: float, **options) -> None:
-        self.alphas = _check_alphas(alphas, 6)
+        self.alphas = check_alphas(alphas, 6)
         self.dt = check_positive(dt, "dt", "seconds")
         self.options = options
 
