@@ -56,6 +56,7 @@ from scipy import stats
 import localize
 from localize import discrete
 from localize import resample as rs
+from localize.diagnostics import AlmostOne, exact_corridor_posteriors, ring_histogram, tv_distance
 from localize.plot import particles as pp
 from localize.sim import corridor_run
 from localize.widgets.particles import sir_app, sir_figure
@@ -299,40 +300,28 @@ plt.show()
 # filter of the Bayes-filter chapter on cells of 5 cm (`localize.discrete`), and
 # measure how far the particle belief is from it: the **total variation
 # distance**, half the summed absolute difference of the probability per 1 m
-# cell (0 = identical, 1 = disjoint).
+# cell (0 = identical, 1 = disjoint). Both live in `localize.diagnostics`; here
+# is the exact filter's loop (a Gaussian motion kernel out to 3 standard
+# deviations, the door likelihood of each reading, and the belief summed per
+# metre):
 
 # %%
-def exact_posteriors(run, cells_per_m=20):
-    """Exact Bayes filter on a fine grid; returns the probability per 1-m cell at every step."""
-    m = int(run.length * cells_per_m)
-    centres = (np.arange(m) + 0.5) / cells_per_m
-    offs = np.arange(-12, 13)                              # +- 0.6 m = 3 standard deviations
-    kernel = stats.norm.pdf(offs / cells_per_m, 0, run.sigma_move)
-    kernel /= kernel.sum()
-    bel = discrete.uniform(m)
-    per_metre = []
-    for k in range(len(run)):
-        if k > 0:
-            bel = discrete.predict(bel, kernel, offset=int(round(run.controls[k] * cells_per_m)))
-        bel = discrete.update(bel, np.exp(run.log_likelihood(centres, run.z[k])))
-        per_metre.append(np.bincount(np.floor(centres).astype(int), weights=bel, minlength=int(run.length)))
-    return per_metre
+print(inspect.getsource(exact_corridor_posteriors).split('"""')[-1])
+
+# %%
+def tv_distance_to(exact, particles, weights):
+    """TV distance between the exact belief and the particles', per 1 m cell of the ring."""
+    return tv_distance(exact, ring_histogram(particles, weights, run.length))
 
 
-def tv_distance(run, exact, particles, weights):
-    approx = np.bincount(np.floor(particles).astype(int) % int(run.length), weights=weights,
-                         minlength=int(run.length))
-    return 0.5 * np.abs(exact - approx).sum()
-
-
-exact = exact_posteriors(run)
+exact = exact_corridor_posteriors(run)
 tv_by_n = []
 print(f"{'N':>6} | TV distance at step 5 | at step 24   (mean of 10 runs)")
 for n in (30, 100, 300, 1000, 3000):
     tvs = []
     for seed in range(10):
         h = particle_filter(run, n, np.random.default_rng(100 + seed))
-        tvs.append([tv_distance(run, exact[k], *h[k]) for k in (5, 24)])
+        tvs.append([tv_distance_to(exact[k], *h[k]) for k in (5, 24)])
     t5, t24 = np.mean(tvs, axis=0)
     print(f"{n:>6} | {t5:21.3f} | {t24:10.3f}")
     tv_by_n.append((n, t5, t24))
@@ -548,15 +537,11 @@ plt.show()
 # weights sum to *just below* one in floating point, as ten weights of 0.1 do, a
 # pointer close to 1 is never passed and the index runs past the end of the
 # array. We can provoke it with a generator whose uniform numbers are the largest
-# double below one:
+# double below one (`localize.diagnostics.AlmostOne`, a `numpy.random.Generator`
+# whose `random` is overridden):
 
 # %%
-class AlmostOne(np.random.Generator):
-    def random(self, size=None, dtype=np.float64, out=None):
-        v = np.nextafter(1.0, 0.0)
-        return float(v) if size is None else np.full(size, v)
-
-
+print(inspect.getsource(AlmostOne.random))
 tenths = np.full(10, 0.1)
 print(f"sum of ten 0.1 in floating point: {float(np.cumsum(tenths)[-1])!r}")
 with filterpy_uses(AlmostOne(np.random.PCG64(0))):
@@ -691,14 +676,14 @@ for thr in (0.0, 0.1, 0.5, 0.9, 1.0):
     n_res, ess_end, tvs = [], [], []
     for seed in range(30):
         rr = corridor_run(np.random.default_rng(200 + seed), n_steps=40)
-        ex = exact_posteriors(rr)[-1]
+        ex = exact_corridor_posteriors(rr)[-1]
         st = [(None if k == 0 else rr.controls[k], rr.z[k]) for k in range(len(rr))]
         rng_f = np.random.default_rng(seed)
         out = rs.bootstrap_filter(rng_f.uniform(0, rr.length, 200), st, rr.move, rr.log_likelihood, rng_f,
                                   threshold=thr)
         n_res.append(out.resampled.sum())
         ess_end.append(out.ess[-1])
-        tvs.append(tv_distance(rr, ex, out.particles[-1], out.weights[-1]))
+        tvs.append(tv_distance(ex, ring_histogram(out.particles[-1], out.weights[-1], rr.length)))
     print(f"{thr:9.1f} | {np.mean(n_res):11.1f} | {np.mean(ess_end):11.1f} | {np.mean(tvs):17.3f} | "
           f"{np.median(tvs):6.3f}")
     tv_by_thr[thr] = np.mean(tvs)
@@ -975,7 +960,7 @@ def tv_at(n, seed, resampler, k=10):
     rng_x = np.random.default_rng(seed)
     out = rs.bootstrap_filter(rng_x.uniform(0, run.length, n), steps[:k + 1], run.move, run.log_likelihood,
                               rng_x, resampler=resampler, threshold=1.0)
-    return tv_distance(run, exact[k], out.particles[k], out.weights[k])
+    return tv_distance_to(exact[k], out.particles[k], out.weights[k])
 
 
 ns = 25 * 2 ** np.arange(8)

@@ -72,12 +72,7 @@ lf = LikelihoodField(office, MAX_RANGE, sigma_hit=0.2, temper=0.1)
 # the **nearest particle** (position, and heading within 0.2 rad).
 
 # %%
-def nearest_particle_distance(particles, pose, max_heading=0.2):
-    d = np.hypot(particles[:, 0] - pose[0], particles[:, 1] - pose[1])
-    dh = np.abs(localize.wrap_angle(particles[:, 2] - pose[2]))
-    d = np.where(dh < max_heading, d, np.inf)
-    return float(d.min())
-
+from localize.diagnostics import nearest_particle_distance  # noqa: E402
 
 run_d = range_run(office, np.random.default_rng(4), n_steps=30, angles=ANGLES, max_range=MAX_RANGE)
 f_d = MCL.uniform(office, 1000, OdometryMotion(run_d.alphas, min_std=0.01), lf, rng=np.random.default_rng(104))

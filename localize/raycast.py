@@ -168,8 +168,18 @@ def cast_ray(grid: OccupancyGrid, x: float, y: float, angle: float, max_range: f
     limit = max_range / res
     # Distance t (along the ray, in cells) to the first vertical and the first
     # horizontal grid line, and between successive lines of each kind.
-    step_j, t_next_x, t_delta_x = _first_crossing(gx, j, dx)
-    step_i, t_next_y, t_delta_y = _first_crossing(gy, i, dy)
+    if dx > 0:
+        step_j, t_next_x, t_delta_x = 1, (j + 1 - gx) / dx, 1 / dx
+    elif dx < 0:
+        step_j, t_next_x, t_delta_x = -1, (gx - j) / -dx, -1 / dx
+    else:
+        step_j, t_next_x, t_delta_x = 0, math.inf, math.inf
+    if dy > 0:
+        step_i, t_next_y, t_delta_y = 1, (i + 1 - gy) / dy, 1 / dy
+    elif dy < 0:
+        step_i, t_next_y, t_delta_y = -1, (gy - i) / -dy, -1 / dy
+    else:
+        step_i, t_next_y, t_delta_y = 0, math.inf, math.inf
     while True:
         if t_next_x < t_next_y:  # cross a vertical line: next column
             t = t_next_x
@@ -185,20 +195,6 @@ def cast_ray(grid: OccupancyGrid, x: float, y: float, angle: float, max_range: f
             return max_range
         if obstacles[i, j]:
             return float(t * res)
-
-
-def _first_crossing(pos: float, cell: int, d: float) -> tuple[int, float, float]:
-    """Along one axis: the cell step, the distance to the first grid line, and between lines.
-
-    ``pos`` is the ray's start in cell units, ``cell`` its cell, ``d`` the
-    axis component of the ray's unit direction. A ray parallel to the lines
-    (``d = 0``) never crosses one.
-    """
-    if d > 0:
-        return 1, (cell + 1 - pos) / d, 1 / d
-    if d < 0:
-        return -1, (pos - cell) / -d, -1 / d
-    return 0, math.inf, math.inf
 
 
 def _cast_exact(grid: OccupancyGrid, poses: NDArray, angles: NDArray, max_range: float,
