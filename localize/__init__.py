@@ -50,9 +50,9 @@ _LAZY_NAMES = {
     "UKFLocalizer": "ekf",
 }
 _SUBMODULES = (
-    "beam_learning", "check", "cli", "compare", "discrete", "ekf", "geometry", "grid", "gridloc", "histogram",
-    "io", "kld", "mapping", "maps", "mcl", "metrics", "motion", "multiscale", "plot", "raycast", "resample",
-    "sensors", "sim", "widgets",
+    "beam_learning", "check", "cli", "compare", "diagnostics", "discrete", "ekf", "geometry", "grid", "gridloc",
+    "histogram", "io", "kld", "mapping", "maps", "mcl", "metrics", "motion", "multiscale", "plot", "raycast",
+    "resample", "sensors", "sim", "smooth", "widgets",
 )
 
 __all__ = ["OccupancyGrid", "wrap_angle", "__version__", *_LAZY_NAMES]
