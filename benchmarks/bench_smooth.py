@@ -76,7 +76,7 @@ def run_one(job: dict) -> dict:
     t0 = time.perf_counter()
     if job.get("from_cache"):
         fw, bw = _load(_job_file(Path(job["from_cache"]), job))       # bw in the log's scan order
-        s = smooth.combine(fw, bw, _fit_for(bad_map, sub, kw))
+        s = smooth.combine(fw, bw, _fit_for(bad_map, sub, kw), odometry=sub.odometry)
         wall_f, wall_s = fw.seconds, fw.seconds + bw.seconds
     else:
         res = smooth.smooth_log(bad_map, sub, rng=np.random.default_rng(job["seed"]), **kw)

@@ -28,7 +28,8 @@ states (``searching`` / ``localized`` / ``lost``):
   the mean of the two estimates weighted by their spreads (inverse variance);
 * both localized but apart: **disagree**. For each stretch of such scans the
   two trajectories are compared on the stretch and ``window`` scans either
-  side by their scan fit: the share of beams whose reading agrees with the
+  side (there, each pass's place carried on by the odometry from the
+  stretch's ends) by their scan fit: the share of beams whose reading agrees with the
   range ray-cast in the map from the estimate (the run driver's fit, see
   :class:`localize.mcl.StateRules`; a wrong place lets beams pass through
   walls). The pass whose fit is better by at least ``min_z`` standard errors
@@ -36,8 +37,9 @@ states (``searching`` / ``localized`` / ``lost``):
   *ambiguous*: the scans cannot tell the two places apart, so the state there
   is not ``localized`` (the estimate is the pass that had been localized
   longer going into the stretch). A pass that loses a stretch followed a wrong
-  place: where it alone is localized on the same localized run, the winner's
-  estimate is used and the state is not ``localized``;
+  place: where it alone is localized on the same localized run, and as long
+  as its estimate follows that place (no jump against the odometry), the
+  winner's estimate is used and the state is not ``localized``;
 * only one localized: that one (**forward** or **backward**);
 * neither: **none**; the state stays honest (``searching`` before the first
   localized scan of the combined trajectory, ``lost`` after it) and the
@@ -70,7 +72,7 @@ from numpy.typing import NDArray
 
 from ._checks import check_count, check_nonnegative, check_positive
 from .cli import RunResult, localize_log
-from .geometry import angle_diff, wrap_angle
+from .geometry import angle_diff, compose, relative, wrap_angle
 from .grid import OccupancyGrid
 from .mcl import RunTrace, _intervals, _scan_fit
 
@@ -234,7 +236,8 @@ class Smoothed:
 
 def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArray], NDArray] | None = None, *,
             agree_distance: float = 0.5, agree_heading: float = float(np.radians(10.0)),
-            window: int = 10, min_z: float = 2.0, min_gain: float = 0.01) -> Smoothed:
+            odometry: NDArray | None = None, window: int = 10, min_z: float = 2.0,
+            min_gain: float = 0.01) -> Smoothed:
     """Combine a forward and a backward pass, both in the log's scan order, scan by scan.
 
     Parameters
@@ -246,8 +249,16 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
         disagreements; without it, the pass localized longer wins.
     agree_distance, agree_heading : float
         Two localized estimates closer than this (metres, radians) agree.
+    odometry : array_like (T, 3), optional
+        The log's odometry poses. With them, the ``window`` scans either side of
+        a stretch compare the two places carried on by the odometry from the
+        stretch's ends (a pass not yet localized there is not held against its
+        place), and a losing pass is distrusted only while it follows its place
+        (until its estimate jumps against the odometry by more than
+        ``agree_distance``).
     window : int
-        The stretch of disagreeing scans is compared on this many scans either side too.
+        With ``odometry``, the stretch of disagreeing scans is compared on this
+        many scans either side too (without, on the stretch alone).
     min_z, min_gain : float
         A pass wins when the mean per-scan difference of the scan fits is at
         least ``min_z`` standard errors (a paired test over the compared scans)
@@ -285,6 +296,11 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
     window = check_count(window, "window", minimum=0)
     min_z = check_nonnegative(min_z, "min_z")
     min_gain = check_nonnegative(min_gain, "min_gain")
+    odo = None
+    if odometry is not None:
+        odo = np.asarray(odometry, dtype=float)
+        if odo.shape != (len(forward), 3):
+            raise ValueError(f"odometry must have shape ({len(forward)}, 3), one pose per scan; got {odo.shape}")
     t = len(forward)
     fl, bl = forward.state == "localized", backward.state == "localized"
     pf, pb = forward.poses, backward.poses
@@ -308,8 +324,15 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
         if fit is not None:
             # the two trajectories compared on the scans of the stretch and `window` scans either side (where a
             # pass's look-alike place shows itself, the other pass may not be localized yet)
-            near = np.arange(max(a - window, 0), min(b + window, t - 1) + 1)
-            ff, fb = fit(pf[near], near), fit(pb[near], near)
+            if odo is not None:
+                # beyond the stretch, each pass's place is carried on by the odometry from the stretch's ends
+                # (a pass still searching there is not held against its place)
+                near = np.arange(max(a - window, 0), min(b + window, t - 1) + 1)
+                hf, hb = _continue(pf, odo, near, a, b), _continue(pb, odo, near, a, b)
+            else:                     # without odometry, only the stretch itself compares like with like
+                near = scans
+                hf, hb = pf[near], pb[near]
+            ff, fb = fit(hf, near), fit(hb, near)
             ok = np.isfinite(ff) & np.isfinite(fb)
             d = fb[ok] - ff[ok]
             row.update(compared_scans=[int(near[0]), int(near[-1])], fit_forward=_round(np.mean(ff[ok]) if ok.any()
@@ -338,10 +361,15 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
         if verdict is not None:
             # the losing pass followed a wrong place through the whole of its localized stretch: it is not
             # trusted where it alone is localized on that stretch (the winner's estimate is used, not localized)
-            lost_mask = fl if verdict == "backward" else bl
+            loser = "forward" if verdict == "backward" else "backward"
+            lost_mask, lp = (fl, pf) if verdict == "backward" else (bl, pb)
             lo_, hi_ = a - _run_length(lost_mask[:a + 1][::-1]) + 1, b + _run_length(lost_mask[b:]) - 1
+            if odo is not None:
+                # ... as long as it follows that place: a jump against the odometry is a new hypothesis
+                lo_ = a - _run_length(~_jumps(lp, odo, d_max)[lo_ + 1:a + 1][::-1])
+                hi_ = b + _run_length(~_jumps(lp, odo, d_max)[b + 1:hi_ + 1])
             alone = np.arange(lo_, hi_ + 1)
-            alone = alone[passes[alone] == ("forward" if verdict == "backward" else "backward")]
+            alone = alone[passes[alone] == loser]
             if alone.size:
                 source[alone] = verdict
                 distrusted[alone] = True
@@ -374,6 +402,28 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
     state[~loc & seen] = "lost"
     return Smoothed(poses, stds, spread, state, passes, source, forward, backward, disagreements,
                     float(d_max), float(a_max))
+
+
+def _continue(p: NDArray, odo: NDArray, scans: NDArray, a: int, b: int) -> NDArray:
+    """``p`` on ``scans``, with the scans before ``a`` / after ``b`` dead-reckoned from ``p[a]`` / ``p[b]``."""
+    out = np.array(p[scans], dtype=float, copy=True)
+    before, after = scans < a, scans > b
+    if before.any():
+        out[before] = compose(p[a], relative(odo[a], odo[scans[before]]))
+    if after.any():
+        out[after] = compose(p[b], relative(odo[b], odo[scans[after]]))
+    return out
+
+
+def _jumps(p: NDArray, odo: NDArray, tol: float) -> NDArray[np.bool_]:
+    """``jump[k]``: the estimate moved from scan k-1 to k more than ``tol`` metres away from what the odometry says."""
+    t = len(p)
+    jump = np.zeros(t, dtype=bool)
+    if t > 1:
+        pred = compose(p[:-1], relative(odo[:-1], odo[1:]))
+        with np.errstate(invalid="ignore"):
+            jump[1:] = ~(np.hypot(*(p[1:, :2] - pred[:, :2]).T) <= tol)
+    return jump
 
 
 def _run_length(mask: NDArray[np.bool_]) -> int:
@@ -486,7 +536,8 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
     mr = kwargs.get("max_range", 30.0)
     fit = scan_fit_function(grid, log, fit_distance, min_range=float(kwargs.get("min_range", 0.0) or 0.0),
                             max_range=None if mr is None else float(mr))
-    s = combine(fw.trace, reverse_trace(bw.trace), fit, agree_distance=agree_distance, agree_heading=agree_heading)
+    s = combine(fw.trace, reverse_trace(bw.trace), fit, odometry=log.odometry, agree_distance=agree_distance,
+                agree_heading=agree_heading)
     tr = smoothed_trace(s)
     spread = np.sqrt(tr.stds[:, 0] ** 2 + tr.stds[:, 1] ** 2)
     covs = np.zeros((n, 3, 3))

@@ -271,3 +271,29 @@ def test_run_filter_is_the_driver_of_both_passes(monkeypatch):
     log, _ = _office_log(0, 6)
     smooth.smooth_log(office(), log, rng=np.random.default_rng(0), n_particles=500, kld=None)
     assert calls == [6, 6]
+
+
+def test_with_odometry_a_losing_pass_is_distrusted_only_while_it_follows_its_wrong_place():
+    t = 20
+    right = np.tile([1.0, 2.0, 0.0], (t, 1))
+    fpos = right.copy()
+    fpos[2:10] = [8.0, 2.0, 0.0]                        # forward: a look-alike place, then it jumps back (scan 10)
+    f = _trace(fpos, ["searching"] * 2 + ["localized"] * 18)
+    bpos = right.copy()
+    bpos[10:] = [5.0, 5.0, 1.0]                          # backward: right, not yet localized at 10-19
+    b = _trace(bpos, ["localized"] * 10 + ["searching"] * 10)
+    odo = np.zeros((t, 3))                               # the robot stands still
+
+    def fit(poses, scans):
+        return np.where(np.hypot(*(np.asarray(poses)[:, :2] - [1.0, 2.0]).T) < 0.5, 0.8, 0.5) + 0.01 * np.sin(scans)
+
+    s = smooth.combine(f, b, fit, odometry=odo)
+    (d,) = s.summary()["disagreements"]
+    assert d["scans"] == [2, 9] and d["chosen"] == "backward" and "distrusted_scans" not in d
+    assert list(s.source[10:]) == ["forward"] * 10 and set(s.state) == {"localized"}
+    assert np.allclose(s.poses[:, :2], [1.0, 2.0])
+    # without odometry the whole localized run of the losing pass is distrusted
+    s2 = smooth.combine(f, b, fit)
+    assert s2.summary()["disagreements"][0]["distrusted_scans"] == [[10, 19]]
+    with pytest.raises(ValueError, match="odometry must have shape"):
+        smooth.combine(f, b, fit, odometry=np.zeros((3, 3)))
