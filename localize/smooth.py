@@ -42,8 +42,9 @@ states (``searching`` / ``localized`` / ``lost``):
   winner's estimate is used and the state is not ``localized``;
 * only one localized: that one (**forward** or **backward**);
 * neither: **none**; the state stays honest (``searching`` before the first
-  localized scan of the combined trajectory, ``lost`` after it) and the
-  estimate is the forward pass's.
+  localized scan of the combined trajectory, ``lost`` after it); the
+  estimate is that of the pass that was localized more recently in its own
+  direction of time.
 
 Examples
 --------
@@ -180,7 +181,8 @@ class Smoothed:
         passes are localized at the scan, and whether they agree.
     source : ndarray (T,) of str
         Where the estimate comes from: ``both`` (their weighted mean),
-        ``forward``, ``backward`` or ``none`` (not localized; forward's estimate).
+        ``forward``, ``backward`` or ``none`` (neither localized: the estimate of the pass localized more
+        recently in its own direction of time).
     forward, backward : RunTrace
         The two passes, both in the log's scan order.
     disagreements : list of dict
@@ -188,6 +190,8 @@ class Smoothed:
         chosen, both passes' mean scan fit and the reason.
     agree_distance, agree_heading : float
         The agreement thresholds (metres, radians).
+    from_backward : ndarray (T,) of bool
+        Scans whose estimate is the backward pass's alone.
     """
 
     poses: NDArray[np.float64]
@@ -201,6 +205,7 @@ class Smoothed:
     disagreements: list = field(default_factory=list)
     agree_distance: float = 0.5
     agree_heading: float = float(np.radians(10.0))
+    from_backward: NDArray[np.bool_] | None = None
 
     def __len__(self) -> int:
         return int(self.poses.shape[0])
@@ -379,7 +384,12 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
     poses = np.array(pf, dtype=float, copy=True)
     stds = np.array(forward.stds, dtype=float, copy=True)
     spread = np.array(forward.spread, dtype=float, copy=True)
-    take_b = source == "backward"
+    # where neither pass is localized, the estimate of the pass localized more recently in its own time direction
+    # (forward: last localized scan before, backward: first one after), whose place is the fresher
+    idx = np.arange(t)
+    since_f = idx - np.maximum.accumulate(np.where(fl, idx, -np.inf))          # inf: never localized so far
+    until_b = np.minimum.accumulate(np.where(bl, idx, np.inf)[::-1])[::-1] - idx
+    take_b = (source == "backward") | ((source == "none") & (until_b < since_f))
     poses[take_b], stds[take_b], spread[take_b] = pb[take_b], backward.stds[take_b], backward.spread[take_b]
     if agree.any():
         sf = np.maximum(np.nan_to_num(forward.spread[agree], nan=1.0), 0.01)
@@ -401,7 +411,7 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
     seen = np.cumsum(loc) > 0
     state[~loc & seen] = "lost"
     return Smoothed(poses, stds, spread, state, passes, source, forward, backward, disagreements,
-                    float(d_max), float(a_max))
+                    float(d_max), float(a_max), take_b & ~agree)
 
 
 def _continue(p: NDArray, odo: NDArray, scans: NDArray, a: int, b: int) -> NDArray:
@@ -464,7 +474,7 @@ def smoothed_trace(s: Smoothed) -> RunTrace:
             events.append((k, f"state {prev} -> {cur}"))
         prev = str(cur)
     events.sort(key=lambda e: e[0])
-    pick_b = s.source == "backward"
+    pick_b = s.source == "backward" if s.from_backward is None else s.from_backward
     means = np.where(pick_b[:, None], bw.means, fw.means)
     n_eff = np.where(pick_b, bw.n_eff, fw.n_eff)
     return replace(fw, poses=s.poses, means=means, stds=s.stds, spread=s.spread, n_eff=n_eff, state=s.state,

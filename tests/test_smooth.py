@@ -108,6 +108,12 @@ def test_only_one_pass_localized_and_neither():
     assert list(s.passes) == ["backward"] * 2 + ["none"] + ["forward"] * 3 + ["none"] * 2
     assert list(s.state) == ["localized"] * 2 + ["lost"] + ["localized"] * 3 + ["lost"] * 2
     assert np.allclose(s.poses[:2, 0], 5.0) and np.allclose(s.poses[2:, 0], 0.0)
+    # where neither is localized, the estimate is that of the pass localized more recently in its own time
+    f3 = _trace(p, ["searching"] * 4 + ["localized"] * 4)
+    b3 = _trace(p + [5.0, 0, 0], ["localized"] * 2 + ["lost"] * 2 + ["localized"] * 4)
+    s3 = smooth.combine(f3, b3)
+    assert list(s3.passes[:4]) == ["backward", "backward", "none", "none"]
+    assert np.allclose(s3.poses[:4, 0], 5.0) and list(s3.state[2:4]) == ["lost", "lost"]
     s2 = smooth.combine(_trace(p, ["searching"] * t), _trace(p, ["searching"] * t))
     assert set(s2.state) == {"searching"} and s2.first_localized() is None        # honest: neither pass localized
     assert "never localized" in smooth.headline(s2.summary())
