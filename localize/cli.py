@@ -1084,7 +1084,7 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
         kw["kld"] = extras["kld"]
     if extras["augmented"] is not None:
         kw["augmented"] = extras["augmented"]
-    if args.smooth:  # forward and backward pass, combined (localize.smooth)
+    if getattr(args, "smooth", False):  # forward and backward pass, combined (localize.smooth)
         from .smooth import smooth_log as run_log
     else:
         run_log = localize_log
@@ -1115,7 +1115,7 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
         settings["bag"] = {k: log.meta.get(k) for k in ("scan_topic", "odom_topic", "odometry", "scan_frame",
                                                          "base_frame", "sensor_offset_source")}
     summary = summarize(res, log, args.particles, ref, settings)
-    if args.smooth:
+    if getattr(args, "smooth", False):
         summary["settings"]["smooth"] = True
         summary["smooth"] = res.smooth.summary()
     summary["seconds_reading_files"] = round(t_read, 3)
@@ -1140,7 +1140,7 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
             + (f", {rtf:g}x real time" if rtf else ""),
             headline(summary),
         ]
-        if args.smooth:
+        if getattr(args, "smooth", False):
             from .smooth import headline as smooth_headline
             lines.append(smooth_headline(summary["smooth"]))
         if ref is not None and summary.get("median_error_while_localized_m") is not None:

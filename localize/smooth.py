@@ -43,8 +43,9 @@ states (``searching`` / ``localized`` / ``lost``):
 * only one localized: that one (**forward** or **backward**);
 * neither: **none**; the state stays honest (``searching`` before the first
   localized scan of the combined trajectory, ``lost`` after it); the
-  estimate is that of the pass that was localized more recently in its own
-  direction of time.
+  estimate is the one that fits the scans better (over five neighbouring
+  scans), or without a fit function, or on a tie, that of the pass that was
+  localized more recently in its own direction of time.
 
 Examples
 --------
@@ -181,8 +182,7 @@ class Smoothed:
         passes are localized at the scan, and whether they agree.
     source : ndarray (T,) of str
         Where the estimate comes from: ``both`` (their weighted mean),
-        ``forward``, ``backward`` or ``none`` (neither localized: the estimate of the pass localized more
-        recently in its own direction of time).
+        ``forward``, ``backward`` or ``none`` (neither localized: see the module's docstring for the estimate).
     forward, backward : RunTrace
         The two passes, both in the log's scan order.
     disagreements : list of dict
@@ -389,7 +389,21 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
     idx = np.arange(t)
     since_f = idx - np.maximum.accumulate(np.where(fl, idx, -np.inf))          # inf: never localized so far
     until_b = np.minimum.accumulate(np.where(bl, idx, np.inf)[::-1])[::-1] - idx
-    take_b = (source == "backward") | ((source == "none") & (until_b < since_f))
+    none = source == "none"
+    b_none = none & (until_b < since_f)
+    if fit is not None and none.any():
+        # ... unless the scans say otherwise: the estimate that fits the scans better (over 5 neighbouring scans)
+        ks = np.flatnonzero(none)
+        diff = np.zeros(t)
+        with np.errstate(invalid="ignore"):
+            dk = fit(pb[ks], ks) - fit(pf[ks], ks)
+        diff[ks] = np.where(np.isfinite(dk), dk, 0.0)
+        for a, b in _intervals(none):
+            seg = diff[a:b + 1]
+            sm = np.convolve(seg, np.ones(5), mode="same")
+            decided = np.abs(sm) > 1e-9
+            b_none[a:b + 1] = np.where(decided, sm > 0, b_none[a:b + 1])
+    take_b = (source == "backward") | b_none
     poses[take_b], stds[take_b], spread[take_b] = pb[take_b], backward.stds[take_b], backward.spread[take_b]
     if agree.any():
         sf = np.maximum(np.nan_to_num(forward.spread[agree], nan=1.0), 0.01)
