@@ -76,7 +76,7 @@ from ._checks import check_count, check_nonnegative, check_positive
 from .cli import RunResult, localize_log
 from .geometry import angle_diff, compose, relative, wrap_angle
 from .grid import OccupancyGrid
-from .mcl import RunTrace, _intervals, _scan_fit
+from .mcl import RunTrace, _intervals, _now, _scan_fit
 
 __all__ = ["PASSES", "Smoothed", "SmoothResult", "reverse_log", "reverse_trace", "combine", "scan_fit_function",
            "smoothed_trace", "smooth_log", "headline"]
@@ -503,13 +503,15 @@ class SmoothResult(RunResult):
     ``smooth`` is the :class:`Smoothed` record, ``columns`` the extra per-scan
     columns of ``trajectory.csv`` (``passes``, ``source``), ``forward`` and
     ``backward`` the two passes' own results (the backward one in reversed
-    scan order, as it ran).
+    scan order, as it ran); ``seconds`` is the two filtering loops' time,
+    ``seconds_combine`` that of the combination.
     """
 
     smooth: Any = None
     columns: dict = field(default_factory=dict)
     forward: Any = None
     backward: Any = None
+    seconds_combine: float = 0.0
 
 
 class _Offset:
@@ -554,6 +556,7 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
     back_kw = {**kwargs, "snapshot_every": 0}
     bw = localize_log(grid, reverse_log(log), rng=rng,
                       progress=None if progress is None else _Offset(progress, n), **back_kw)
+    t0 = _now()
     if fit_distance is None:
         sigma = (kwargs.get("sensor_params") or {}).get("sigma_hit", 0.3)
         fit_distance = 2.0 * float(sigma)
@@ -569,7 +572,7 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
     res = SmoothResult(times=fw.times, estimates=tr.poses, spread=spread, n_eff=tr.n_eff, updated=fw.updated,
                        seconds=fw.seconds + bw.seconds, snapshots=fw.snapshots, covariances=covs, state=tr.state,
                        trace=tr, smooth=s, columns={"passes": s.passes, "source": s.source}, forward=fw,
-                       backward=bw)
+                       backward=bw, seconds_combine=_now() - t0)
     return res
 
 
