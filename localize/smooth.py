@@ -400,7 +400,9 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
         diff[ks] = np.where(np.isfinite(dk), dk, 0.0)
         for a, b in _intervals(none):
             seg = diff[a:b + 1]
-            sm = np.convolve(seg, np.ones(5), mode="same")
+            c = np.concatenate([[0.0], np.cumsum(seg)])
+            i = np.arange(seg.size)
+            sm = c[np.minimum(i + 3, seg.size)] - c[np.maximum(i - 2, 0)]       # sum over scans i-2 .. i+2
             decided = np.abs(sm) > 1e-9
             b_none[a:b + 1] = np.where(decided, sm > 0, b_none[a:b + 1])
     take_b = (source == "backward") | b_none

@@ -303,3 +303,18 @@ def test_with_odometry_a_losing_pass_is_distrusted_only_while_it_follows_its_wro
     assert s2.summary()["disagreements"][0]["distrusted_scans"] == [[10, 19]]
     with pytest.raises(ValueError, match="odometry must have shape"):
         smooth.combine(f, b, fit, odometry=np.zeros((3, 3)))
+
+
+def test_where_neither_pass_is_localized_the_better_fitting_estimate_is_used():
+    t = 9
+    p = np.zeros((t, 3))
+    f = _trace(p, ["searching"] * 3 + ["localized"] * 3 + ["lost"] * 3)
+    b = _trace(p + [5.0, 0, 0], ["localized"] * 2 + ["searching"] * 7)
+
+    def fit(poses, scans):                                    # the backward pass's place fits the scans
+        return np.where(np.asarray(poses)[:, 0] > 4, 0.9, 0.3)
+
+    s = smooth.combine(f, b, fit)
+    assert s.passes[2] == "none" and s.poses[2, 0] == 5.0          # a one-scan stretch
+    assert list(s.passes[6:]) == ["none"] * 3 and np.allclose(s.poses[6:, 0], 5.0)
+    assert list(s.state[6:]) == ["lost"] * 3                       # still honest: neither pass is localized
