@@ -37,8 +37,8 @@ states (``searching`` / ``localized`` / ``lost``):
   *ambiguous*: the scans cannot tell the two places apart, so the state there
   is not ``localized`` (the estimate is the pass that had been localized
   longer going into the stretch). A pass that loses a stretch followed a wrong
-  place: where it alone is localized on the same localized run, and as long
-  as its estimate follows that place (no jump against the odometry), the
+  place: on the scans next to the stretch where it alone is localized, as
+  long as its estimate follows that place (no jump against the odometry), the
   winner's estimate is used and the state is not ``localized``;
 * only one localized: that one (**forward** or **backward**);
 * neither: **none**; the state stays honest (``searching`` before the first
@@ -367,14 +367,16 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
             # the losing pass followed a wrong place through the whole of its localized stretch: it is not
             # trusted where it alone is localized on that stretch (the winner's estimate is used, not localized)
             loser = "forward" if verdict == "backward" else "backward"
-            lost_mask, lp = (fl, pf) if verdict == "backward" else (bl, pb)
-            lo_, hi_ = a - _run_length(lost_mask[:a + 1][::-1]) + 1, b + _run_length(lost_mask[b:]) - 1
+            lp = pf if verdict == "backward" else pb
+            # the scans next to the stretch where the loser alone is localized (a scan where both agree ends it)
+            only = passes == loser
+            lo_, hi_ = a - _run_length(only[:a][::-1]), b + _run_length(only[b + 1:])
             if odo is not None:
                 # ... as long as it follows that place: a jump against the odometry is a new hypothesis
-                lo_ = a - _run_length(~_jumps(lp, odo, d_max)[lo_ + 1:a + 1][::-1])
-                hi_ = b + _run_length(~_jumps(lp, odo, d_max)[b + 1:hi_ + 1])
-            alone = np.arange(lo_, hi_ + 1)
-            alone = alone[passes[alone] == loser]
+                jump = _jumps(lp, odo, d_max)
+                lo_ = a - _run_length(~jump[lo_ + 1:a + 1][::-1])
+                hi_ = b + _run_length(~jump[b + 1:hi_ + 1])
+            alone = np.concatenate([np.arange(lo_, a), np.arange(b + 1, hi_ + 1)]).astype(int)
             if alone.size:
                 source[alone] = verdict
                 distrusted[alone] = True
