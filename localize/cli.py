@@ -805,7 +805,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(a look-alike corridor), the pass whose estimates fit the scans better wins, and a tie "
                         "is reported as not localized. trajectory.csv gets the columns passes (both, disagree, "
                         "forward, backward, none: which passes are localized at the scan and whether they agree) "
-                        "and source; summary.json a 'smooth' section. Takes twice as long (see localize.smooth).")
+                        "and source; summary.json a 'smooth' section. Takes twice as long (see localize.smooth). "
+                        "Example: --smooth")
     f.add_argument("--track", action="store_true",
                    help="pose tracking instead of global localization: start around the log's first reference "
                         "pose (needs a corrected log).")
