@@ -318,3 +318,25 @@ def test_where_neither_pass_is_localized_the_better_fitting_estimate_is_used():
     assert s.passes[2] == "none" and s.poses[2, 0] == 5.0          # a one-scan stretch
     assert list(s.passes[6:]) == ["none"] * 3 and np.allclose(s.poses[6:, 0], 5.0)
     assert list(s.state[6:]) == ["lost"] * 3                       # still honest: neither pass is localized
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_real_log_smoothed_from_the_first_scan(shared_data):
+    """ACES, first 200 scans, map from the corrected poses, raw odometry, CLI defaults: the forward pass
+    searches at the start, the smoothed trajectory is localized from scan 0 and every scan it calls
+    localized is within 1 m of the corrected pose."""
+    from localize import io as lio
+    from localize.mapping import map_from_log
+
+    p = shared_data / "carmen" / "aces-corrected.log.gz"
+    if not p.exists():
+        pytest.skip(f"{p} not found")
+    log = lio.read_log(p).select(slice(0, 200))
+    grid = map_from_log(log, resolution=0.05)
+    res = smooth.smooth_log(grid, log, rng=np.random.default_rng(0), **_cli_kwargs())
+    fw = res.smooth.forward
+    assert fw.first_localized() >= 2 and res.trace.first_localized() == 0
+    loc = res.state == "localized"
+    e = _err(res.estimates, log.poses)
+    assert loc.mean() > np.mean(fw.state == "localized") and np.all(e[loc] < 1.0)
