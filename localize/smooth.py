@@ -66,7 +66,7 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -84,8 +84,6 @@ __all__ = ["PASSES", "Smoothed", "SmoothResult", "reverse_log", "reverse_trace",
 #: Values of the per-scan ``passes`` column.
 PASSES = ("both", "disagree", "forward", "backward", "none")
 
-_PER_SCAN = ("poses", "means", "stds", "spread", "best_weight", "n_eff", "n_particles", "n_injected", "p_inject",
-             "updated", "resampled", "degenerate", "n_valid", "fit", "on_map", "state")
 
 
 def reverse_log(log):
@@ -113,13 +111,14 @@ def reverse_log(log):
 def reverse_trace(trace: RunTrace) -> RunTrace:
     """A :class:`~localize.mcl.RunTrace` of a reversed log turned back into the log's own scan order.
 
-    Every per-scan array is flipped; an event of step ``k`` becomes one of
+    Every per-scan array (each array field of length ``T``) is flipped; an event of step ``k`` becomes one of
     scan ``T - 1 - k``; snapshots are renumbered the same way.
     """
     if not isinstance(trace, RunTrace):
         raise TypeError(f"trace must be a localize.mcl.RunTrace; got {type(trace).__name__}")
     t = len(trace)
-    flipped = {name: np.ascontiguousarray(getattr(trace, name)[::-1]) for name in _PER_SCAN}
+    flipped = {f.name: np.ascontiguousarray(getattr(trace, f.name)[::-1]) for f in fields(trace)
+               if isinstance(getattr(trace, f.name), np.ndarray) and getattr(trace, f.name).shape[:1] == (t,)}
     events = sorted(((t - 1 - int(k), str(text)) for k, text in trace.events), key=lambda e: e[0])
     snaps = {t - 1 - int(k): v for k, v in trace.snapshots.items()}
     return replace(trace, events=events, snapshots=snaps, **flipped)
