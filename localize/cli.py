@@ -409,6 +409,8 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
     if reference is not None:
         cols += ["ref_x", "ref_y", "ref_theta", "error"]
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
+    extra = getattr(res, "columns", None) or {}  # more per-scan columns (localize.smooth: passes, source)
+    cols += list(extra)
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(cols)
@@ -417,7 +419,7 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
                    f"{res.n_eff[k]:.1f}", str(state[k])]
             if reference is not None:
                 row += [*(f"{v:.6f}" for v in reference[k]), f"{err[k]:.4f}"]
-            w.writerow(row)
+            w.writerow(row + [str(v[k]) for v in extra.values()])
     return path
 
 
@@ -798,6 +800,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "Example: --seed 7")
     for opt in FILTER_OPTIONS:  # the options whose defaults are DEFAULTS
         opt.add_to(f)
+    f.add_argument("--smooth", action="store_true",
+                   help="offline: filter the recorded log forwards and again backwards in time (the same settings, "
+                        "the log reversed), and combine the two passes scan by scan. The backward pass localizes "
+                        "the start that the forward pass spent searching; where both are localized but disagree "
+                        "(a look-alike corridor), the pass whose estimates fit the scans better wins, and a tie "
+                        "is reported as not localized. trajectory.csv gets the columns passes (both, disagree, "
+                        "forward, backward, none: which passes are localized at the scan and whether they agree) "
+                        "and source; summary.json a 'smooth' section. Takes twice as long (see localize.smooth). "
+                        "Example: --smooth")
     f.add_argument("--track", action="store_true",
                    help="pose tracking instead of global localization: start around the log's first reference "
                         "pose (needs a corrected log).")
@@ -1070,7 +1081,11 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
         kw["kld"] = extras["kld"]
     if extras["augmented"] is not None:
         kw["augmented"] = extras["augmented"]
-    res = localize_log(grid, log, rng=rng, snapshot_every=frames, progress=progress, **kw)
+    if getattr(args, "smooth", False):  # forward and backward pass, combined (localize.smooth)
+        from .smooth import smooth_log as run_log
+    else:
+        run_log = localize_log
+    res = run_log(grid, log, rng=rng, snapshot_every=frames, progress=progress, **kw)
     progress.close()
     ref = log.poses
     write_trajectory(dest.path("trajectory.csv"), res, ref)
@@ -1093,6 +1108,9 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
         settings["bag"] = {k: log.meta.get(k) for k in ("scan_topic", "odom_topic", "odometry", "scan_frame",
                                                          "base_frame", "sensor_offset_source")}
     summary = summarize(res, log, args.particles, ref, settings)
+    if getattr(args, "smooth", False):
+        summary["settings"]["smooth"] = True
+        summary["smooth"] = res.smooth.summary()
     summary["seconds_reading_files"] = round(t_read, 3)
     if args.animate:
         t_anim = time.perf_counter()
@@ -1115,6 +1133,9 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
             + (f", {rtf:g}x real time" if rtf else ""),
             headline(summary),
         ]
+        if getattr(args, "smooth", False):
+            from .smooth import headline as smooth_headline
+            lines.append(smooth_headline(summary["smooth"]))
         if ref is not None and summary.get("median_error_while_localized_m") is not None:
             lines.append(f"against the log's reference poses, while localized: median error "
                          f"{summary['median_error_while_localized_m']} m, 90% {summary['p90_error_while_localized_m']} m"
