@@ -523,8 +523,8 @@ class _Offset:
     def __init__(self, progress: Any, offset: int) -> None:
         self.progress, self.offset = progress, offset
 
-    def update(self, done: int, extra: str = "") -> None:
-        self.progress.update(self.offset + done, extra)
+    def update_to(self, done: int) -> None:
+        self.progress.update_to(self.offset + done)
 
 
 def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: Any = None,
@@ -569,13 +569,8 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
     s = combine(fw.trace, reverse_trace(bw.trace), fit, odometry=log.odometry, agree_distance=agree_distance,
                 agree_heading=agree_heading)
     tr = smoothed_trace(s)
-    spread = np.sqrt(tr.stds[:, 0] ** 2 + tr.stds[:, 1] ** 2)
-    covs = np.zeros((n, 3, 3))
-    covs[:, [0, 1, 2], [0, 1, 2]] = tr.stds ** 2
-    res = SmoothResult(times=fw.times, estimates=tr.poses, spread=spread, n_eff=tr.n_eff, updated=fw.updated,
-                       seconds=fw.seconds + bw.seconds, snapshots=fw.snapshots, covariances=covs, state=tr.state,
-                       trace=tr, smooth=s, columns={"passes": s.passes, "source": s.source}, forward=fw,
-                       backward=bw, seconds_combine=_now() - t0)
+    res = SmoothResult(times=fw.times, trace=tr, smooth=s, columns={"passes": s.passes, "source": s.source},
+                       forward=fw, backward=bw, seconds_combine=_now() - t0)
     return res
 
 
