@@ -78,7 +78,7 @@ def _doctest_namespace(doctest_namespace):
     doctest_namespace["toy_mcl"] = toy_mcl
 
 
-# The book's .py files are jupytext twins of the notebooks, not modules:
+# The book's .py files (book/src/) are jupytext twins of the notebooks, not modules:
 # keep --doctest-modules from importing (and so running) them. The homework
 # template is meant to fail until a student fills it in.
-collect_ignore_glob = ["book/*.py", "book/homework/*", "book/_build/*", "_build/*", "benchmarks/*", ".ci/*"]
+collect_ignore_glob = ["book/*.py", "book/src/*", "book/homework/*", "book/_build/*", "_build/*", "benchmarks/*", ".ci/*"]

@@ -50,6 +50,10 @@ check                      your function
 ``map_image``              ``fn(image, negate) -> occupancy`` (row 0 at the bottom, NaN unknown)
 ``injection``              ``fn(likelihoods, w_slow, w_fast, alpha_slow, alpha_fast) -> (w_slow, w_fast, p)``
 ``ekf_update``             ``fn(mean, cov, z, landmark, Q) -> (mean, cov)``
+``predict_stop``           ``fn(belief, kernel, offset) -> array`` (bounded hallway)
+``kld_loop``               ``fn(samples, bin_size, epsilon, delta, n_min) -> n``
+``xy_reader``              ``fn(path) -> io.LaserLog`` (chapter 9's "XY log")
+``innovation_gate``        ``fn(mean, cov, z, landmark, Q) -> bool`` (keep?)
 =========================  ====================================================
 
 ``params`` for the beam model is a dict with keys ``z_hit, z_short, z_max,
@@ -86,7 +90,12 @@ __all__ = [
     "map_image",
     "injection",
     "ekf_update",
+    "predict_stop",
+    "kld_loop",
+    "xy_reader",
+    "innovation_gate",
     "ODOMETRY_CASES",
+    "XY_MAX_RANGE",
 ]
 
 #: Beam-model parameters used by :func:`beam_model` and :func:`scan_log_likelihood`.
@@ -1219,3 +1228,368 @@ def ekf_update(fn: Callable) -> Report:
                   f"theta = {mu[2]:.4f}", "wrap the new heading to [-pi, pi)", expected="theta in [-pi, pi)")
 
     return _run("ekf_update", body)
+
+
+# ---------------------------------------------------------------------------- chapter 1: a bounded hallway
+def _predict_stop_ref(belief: NDArray, kernel: NDArray, offset: int, *, together: bool = True) -> NDArray:
+    """The bounded hallway of chapter 1: mass that would run past an end stays in the end cell.
+
+    ``together=False`` is the shift-then-blur mistake: shift (stopping at the ends), then blur (stopping again).
+    """
+    n, c = belief.size, kernel.size // 2
+    out = np.zeros(n)
+    if together:
+        for src in range(n):
+            for m, p in enumerate(kernel):
+                out[min(max(src + offset + m - c, 0), n - 1)] += belief[src] * p
+        return out
+    shifted = np.zeros(n)
+    for src in range(n):
+        shifted[min(max(src + offset, 0), n - 1)] += belief[src]
+    for src in range(n):
+        for m, p in enumerate(kernel):
+            out[min(max(src + m - c, 0), n - 1)] += shifted[src] * p
+    return out
+
+
+def predict_stop(fn: Callable) -> Report:
+    """Check ``fn(belief, kernel, offset)``: the prediction in a bounded hallway where the robot stops at the ends.
+
+    Chapter 1, exercise 2. The robot is commanded ``offset`` cells (positive =
+    towards higher index) and ends ``d`` cells beyond the commanded cell with
+    probability ``kernel[c + d]`` (``c`` the kernel's centre); a move that
+    would end past either end of the hallway ends **in the end cell**. Shift
+    and blur act together on each source cell, so no mass is lost.
+    """
+    from . import discrete
+
+    n = 10
+    cases = [
+        ("mass that would run past the right end stops in the last cell", np.r_[np.zeros(7), 0.2, 0.3, 0.5],
+         np.array([0.1, 0.8, 0.1]), 2),
+        ("a move to the left stops in the first cell", np.r_[0.5, 0.3, 0.2, np.zeros(7)],
+         np.array([0.2, 0.7, 0.1]), -2),
+        ("away from the ends it is the ordinary prediction (a lopsided kernel)",
+         np.r_[np.zeros(3), 0.6, 0.4, np.zeros(5)], np.array([0.1, 0.6, 0.3]), 1),
+    ]
+
+    def diagnose(out: NDArray, b: NDArray, k: NDArray, off: int) -> str:
+        lost = discrete.predict(b, k, offset=off, mode="constant")
+        if np.allclose(out, discrete.predict(b, k, offset=off), atol=1e-9):
+            return ("your hallway wraps around (np.roll, or discrete.predict's default mode='wrap'): mass leaving "
+                    "one end entered the other; here it must stop in the end cell")
+        if np.allclose(out, lost, atol=1e-9):
+            return "mass that would leave the hallway is lost: add it to the end cell instead (clip the target cell)"
+        if lost.sum() > 0 and np.allclose(out, lost / lost.sum(), atol=1e-9):
+            return ("renormalising after losing the mass spreads it over every cell: put it on the end cell, where "
+                    "the robot stopped")
+        if np.allclose(out, _predict_stop_ref(b, k, off, together=False), atol=1e-9):
+            return ("you shifted first and blurred after: a robot that would overshoot the end by 1 to 3 cells "
+                    "stops at the end every time, so shift and blur each source cell together, then clip")
+        if np.allclose(out, _predict_stop_ref(b, k[::-1], off), atol=1e-9):
+            return ("the kernel is mirrored: kernel[c + d] is the chance of ending d cells BEYOND the commanded "
+                    "cell (np.convolve's orientation, not np.correlate's)")
+        if np.allclose(out, _predict_stop_ref(b, k, -off), atol=1e-9):
+            return "you moved the wrong way: a positive offset moves towards higher cell indices"
+        return ("for every source cell src and kernel entry m, add belief[src] * kernel[m] to cell "
+                "min(max(src + offset + m - c, 0), n - 1)")
+
+    def body(r: Report) -> None:
+        for name, b, k, off in cases:
+            keep = b.copy()
+            want = _predict_stop_ref(b, k, off)
+            out = _array(r, name, _call(r, name, fn, b.copy(), k.copy(), off), (n,))
+            ok = bool(np.allclose(out, want, atol=1e-9))
+            r.add(name, ok, _fixed(out), "" if ok else diagnose(out, keep, k, off), expected=_fixed(want))
+            r.add(f"{name}: mass is conserved", abs(float(out.sum()) - 1.0) < 1e-9, f"sum = {float(out.sum()):.6g}",
+                  "nothing falls off a hallway whose ends stop the robot: the prediction must sum to one",
+                  expected="sum = 1")
+        b = cases[0][1].copy()
+        keep = b.copy()
+        _call(r, "the input belief is left unchanged", fn, b, cases[0][2].copy(), 2)
+        r.add("the input belief is left unchanged", np.array_equal(b, keep), f"input became {_fixed(b)}",
+              "build a new array (np.zeros(n)) instead of adding into the belief you were given",
+              expected=_fixed(keep))
+
+    return _run("predict_stop", body)
+
+
+# ---------------------------------------------------------------------------- chapter 8: the KLD loop
+def _kld_rule(keys: NDArray, epsilon: float, delta: float, n_min: int, *, k_shift: int = 0,
+              only_on_new: bool = False, lag: bool = False) -> int:
+    """The KLD stopping rule as PR table 8.4's loop, with switches for the classic mistakes."""
+    from .kld import kld_bound
+
+    seen: set[int] = set()
+    n = 0
+    for key in keys.tolist():
+        n += 1
+        new = key not in seen
+        if not lag:
+            seen.add(key)
+        k = len(seen) + k_shift
+        need = float(kld_bound(k, epsilon, delta)) if k > 1 else 0.0
+        if lag:
+            seen.add(key)
+        if only_on_new and not new:
+            continue
+        if n >= need and n >= n_min:
+            return n
+    return n
+
+
+def kld_loop(fn: Callable) -> Report:
+    """Check the KLD stopping rule ``fn(samples, bin_size, epsilon, delta, n_min) -> n`` (chapter 8, exercise 2).
+
+    ``samples`` (M, 3) are candidate particles drawn one after another; return
+    the smallest ``n`` such that the first ``n`` of them satisfy ``n >= n_min``
+    and ``n >= kld_bound(k)``, ``k`` the number of bins of size ``bin_size``
+    they occupy (PR table 8.4), or ``M`` when no ``n`` does. The reference is
+    :func:`localize.kld.kld_sample_size`.
+    """
+    from .kld import bin_keys, kld_sample_size
+
+    rng = np.random.default_rng(11)
+    b = (0.5, 0.5, float(np.radians(10.0)))
+    spot = rng.normal([2.0, 3.0, 0.0], [0.3, 0.3, 0.1], size=(4000, 3))
+    two = np.concatenate([rng.normal([1.0, 1.0, 0.5], [0.2, 0.2, 0.05], size=(1500, 3)),
+                          rng.normal([8.0, 4.0, -2.0], [0.2, 0.2, 0.05], size=(1500, 3))])[rng.permutation(3000)]
+    cases = [
+        ("a concentrated cloud: the bound stops the loop", spot, 0.05, 0.01, 50),
+        ("two clusters, a looser epsilon", two, 0.15, 0.05, 50),
+        ("every sample in one bin: n_min decides", np.tile([[1.1, 1.1, 0.01]], (500, 1)), 0.05, 0.01, 120),
+        ("the sample that reaches n_min opens a second bin: it counts at once",
+         np.array([[1.1, 1.1, 0.01]] * 49 + [[3.1, 1.1, 0.01]] + [[1.1, 1.1, 0.01], [3.1, 1.1, 0.01]] * 50),
+         0.05, 0.01, 50),
+        ("a spread cloud never meets the bound: every sample is needed",
+         rng.uniform([0, 0, -np.pi], [20, 10, np.pi], size=(3000, 3)), 0.05, 0.01, 50),
+    ]
+
+    def body(r: Report) -> None:
+        outs, wants, alts = [], [], {}
+        for name, s, eps, dl, n_min in cases:
+            got = _call(r, name, fn, s.copy(), b, eps, dl, n_min)
+            if not _is_intlike(got) or np.ndim(got) != 0:
+                r.add(name, False, f"returned {got!r}", "return the number of samples n as one integer",
+                      expected=str(kld_sample_size(s, b, eps, dl, n_min)))
+                raise _Stop
+            keys = bin_keys(s, b)
+            outs.append(int(got))
+            wants.append(kld_sample_size(s, b, eps, dl, n_min))
+            for mistake, kw in {"k": dict(k_shift=1), "new": dict(only_on_new=True), "nmin": dict(n_min=1),
+                                "lag": dict(lag=True)}.items():
+                kw = {"n_min": n_min, **kw}
+                alts.setdefault(mistake, []).append(_kld_rule(keys, eps, dl, kw.pop("n_min"), **kw))
+        if outs == wants:
+            hint = ""
+        elif all(abs(o - w) == 1 for o, w in zip(outs, wants) if o != w):
+            hint = "off by one: count the samples from 1 and stop at the FIRST n with n >= n(k) and n >= n_min"
+        elif outs == alts["lag"]:
+            hint = ("add the new sample's bin to the occupied set BEFORE testing the rule: k counts the bins of "
+                    "the first n samples, this one included")
+        elif outs == alts["k"]:
+            hint = ("the bound of PR table 8.4 line 16 is written with k - 1 (kld_bound(k) already does that): "
+                    "k is the number of occupied bins, pass it as it is")
+        elif outs == alts["new"]:
+            hint = ("test the stopping rule after every sample, not only when a sample opens a new bin (PR table "
+                    "8.4 loops `until n >= n_chi and n >= n_min`)")
+        elif outs == alts["nmin"]:
+            hint = "also require n >= n_min: with one or two bins the bound asks for (almost) nothing"
+        elif outs[:-1] == wants[:-1]:
+            hint = "when no n meets the rule, every candidate is needed: return len(samples)"
+        else:
+            hint = ("loop over the samples; keep a set of occupied bin keys (localize.kld.bin_keys); after each sample "
+                    "stop when n >= kld_bound(len(bins), epsilon, delta) and n >= n_min")
+        for (name, *_), o, w in zip(cases, outs, wants):
+            r.add(name, o == w, f"n = {o}", hint, expected=f"n = {w}")
+
+    return _run("kld_loop", body)
+
+
+# ---------------------------------------------------------------------------- chapter 9: a file-format trap
+#: The "XY log" of chapter 9, exercise 2: ``SCAN t x y theta r1 ... rn``, ranges in millimetres from +90 down to
+#: -90 degrees (clockwise), 0 = no return; the scanner reaches 30 m.
+XY_MAX_RANGE = 30.0
+
+
+def xy_reader(fn: Callable) -> Report:
+    """Check a reader ``fn(path) -> io.LaserLog`` of chapter 9's made-up "XY log" (exercise 2).
+
+    Each line is ``SCAN t x y theta r1 ... rn``: time [s], odometry pose
+    [m, m, rad], then ranges in **millimetres** from +90 degrees **down** to
+    -90 degrees (clockwise), ``0`` meaning "no return", for a scanner of
+    :data:`XY_MAX_RANGE` metres. The book's conventions: ranges in metres,
+    angles counter-clockwise from the robot's right (beam 0 at -pi/2), a
+    reading ``>= max_range`` for no return. A line with the wrong number of
+    fields raises :class:`localize.io.FormatError` naming its line (1-based,
+    blank lines counted).
+    """
+    import tempfile
+    from pathlib import Path
+
+    from .io import FormatError
+
+    good = "SCAN 0.0 1.0 2.0 0.1 1000 0 3000 2500\nSCAN 0.5 1.2 2.1 0.15 1200 2000 0 2400\n"
+    file_order = np.array([[1.0, 0.0, 3.0, 2.5], [1.2, 2.0, 0.0, 2.4]])
+    want_r = np.where(file_order == 0, XY_MAX_RANGE, file_order)[:, ::-1]
+    want_a = np.linspace(-np.pi / 2, np.pi / 2, 4)
+
+    def body(r: Report) -> None:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "robot.xy"
+            path.write_text(good)
+            name = "reads a two-scan file"
+            log = _call(r, name, fn, path)
+            try:
+                times, odo, rng_, ang = (np.asarray(getattr(log, a), dtype=float)
+                                         for a in ("times", "odometry", "ranges", "angles"))
+                max_range = float(log.max_range)
+            except (AttributeError, TypeError, ValueError):
+                r.add(name, False, f"returned {type(log).__name__}",
+                      "return an io.LaserLog(times=..., odometry=..., ranges=..., angles=..., max_range=...)",
+                      expected="an io.LaserLog")
+                raise _Stop from None
+            r.add(name, rng_.shape == (2, 4) and odo.shape == (2, 3), f"ranges shape {rng_.shape}, "
+                  f"odometry shape {odo.shape}", "one row per SCAN line, one column per beam (4 here)",
+                  expected="ranges shape (2, 4), odometry shape (2, 3)")
+            if rng_.shape != (2, 4) or ang.shape != (4,):
+                raise _Stop
+            r.add("times and odometry poses as written", np.allclose(times, [0.0, 0.5]) and
+                  np.allclose(odo, [[1.0, 2.0, 0.1], [1.2, 2.1, 0.15]]), f"times {_fixed(times)}, odometry "
+                  f"{_fixed(odo).replace(chr(10), '')}", "fields 2-5 are t, x, y, theta",
+                  expected="times [0. 0.5], odometry [[1. 2. 0.1] [1.2 2.1 0.15]]")
+            ok_a = bool(np.allclose(ang, want_a))
+            r.add("beam angles counter-clockwise from the right, -pi/2 ... +pi/2", ok_a, _fixed(ang),
+                  "the file runs from +90 down to -90 degrees; the book's beam 0 points right (-pi/2) and angles "
+                  "increase counter-clockwise: reverse the file's beam order" if np.allclose(ang, want_a[::-1])
+                  else "angles = np.linspace(-np.pi / 2, np.pi / 2, n_beams)", expected=_fixed(want_a))
+            # compare each beam's reading at its angle, whatever order the student stored them in
+            order = np.argsort(ang, kind="stable")
+            got = rng_[:, order]
+            hit = file_order != 0
+            ok_r = bool(np.allclose(got[:, ::-1][hit], file_order[hit]))
+            if ok_r:
+                hint = ""
+            elif np.allclose(got[hit[:, ::-1]], file_order[:, ::-1][hit[:, ::-1]] * 1000):
+                hint = "the file stores millimetres: divide by 1000 for metres"
+            elif np.allclose(got[:, ::-1][hit[:, ::-1]], file_order[:, ::-1][hit[:, ::-1]]):
+                hint = ("the beams are paired with the wrong angles: the file's FIRST reading is at +90 degrees "
+                        "(the robot's left), so reverse the readings together with the angles")
+            else:
+                hint = "reading i of the file (0-based) is at +90 - 180 i / (n - 1) degrees, in mm"
+            r.add("each reading in metres at its own angle", ok_r, _fixed(got).replace("\n", ""), hint,
+                  expected=_fixed(want_r).replace("\n", ""))
+            none = got[:, ::-1][~hit]
+            ok_n = bool(np.all(none >= max_range) and max_range == XY_MAX_RANGE)
+            r.add("0 in the file means no return: a reading at max_range (30 m)", ok_n,
+                  f"no-return readings {_fixed(none)}, max_range {max_range:g}",
+                  "a 0 is no return, not an obstacle touching the sensor: store max_range there (30 m)"
+                  if np.any(none < max_range) else "this scanner reaches 30 m: max_range=30.0",
+                  expected="no-return readings >= 30, max_range 30")
+            bad = "SCAN 0.0 1.0 2.0 0.1 1000 0 3000 2500\n\nSCAN 0.5 1.2 2.1 0.15 1200 2000\n"
+            path.write_text(bad)
+            name = "a short line raises io.FormatError naming its line (3: blank lines count)"
+            try:
+                with np.errstate(all="ignore"):
+                    fn(path)
+            except FormatError as err:
+                r.add(name, err.line == 3, f"FormatError at line {err.line}: {err}",
+                      "count lines from 1 and keep counting over blank lines: enumerate(text.splitlines(), start=1)",
+                      expected="FormatError at line 3")
+            except Exception as err:  # noqa: BLE001 - any student error becomes a verdict
+                r.add(name, False, f"{type(err).__name__}: {err}",
+                      "compare each line's field count with the first scan's and raise "
+                      "io.FormatError(path, line_number, 'expected N fields; got M')", expected="FormatError at line 3")
+            else:
+                r.add(name, False, "no error", "check the number of fields of every line against the first line's",
+                      expected="FormatError at line 3")
+
+    return _run("xy_reader", body)
+
+
+# ---------------------------------------------------------------------------- chapter 10: innovation gating
+def innovation_gate(fn: Callable, gate: float = 9.21) -> Report:
+    """Check ``fn(mean, cov, z, landmark, Q) -> bool``: keep a sighting inside the 99% innovation gate.
+
+    Chapter 10, exercise 2. With ``z_hat`` and ``H`` at ``mean``
+    (:func:`localize.ekf.landmark_measurement`, :func:`localize.ekf.landmark_jacobian`),
+    ``y = z - z_hat`` with the bearing wrapped and ``S = H cov H^T + Q``,
+    keep the sighting (return True) when ``y^T S^-1 y <= gate`` (9.21, the
+    99% point of chi-square with 2 degrees of freedom).
+    """
+    from .ekf import landmark_jacobian, landmark_measurement
+    from .geometry import wrap_angle as _wrap
+
+    def d2(mean, cov, z, m, q, wrap=True, with_q=True, euclid=False):
+        h = landmark_jacobian(mean, m)
+        s = h @ cov @ h.T + (q if with_q else 0.0)
+        y = np.asarray(z, float) - landmark_measurement(mean, m)
+        if wrap:
+            y[1] = _wrap(y[1])
+        return float(y @ y) if euclid else float(y @ np.linalg.solve(s, y))
+
+    q = np.diag([0.04, 0.0025])
+    cov = np.diag([0.04, 0.04, 0.01])
+    mean, m = np.array([1.0, 1.0, np.pi / 2]), np.array([4.0, 5.0])
+
+    def along_range(target, c=cov):
+        """A sighting whose only innovation is in range, at Mahalanobis distance ``target``."""
+        h = landmark_jacobian(mean, m)
+        s_inv = np.linalg.inv(h @ c @ h.T + q)
+        return landmark_measurement(mean, m) + [math.sqrt(target / s_inv[0, 0]), 0.0]
+
+    tiny = np.diag([1e-6, 1e-6, 1e-8])
+    behind_mean, behind_m = np.array([0.0, 0.0, 3.12]), np.array([5.0, -0.1])
+    zb = landmark_measurement(behind_mean, behind_m)
+    zb = np.array([zb[0] + 0.05, _wrap(zb[1] + 0.03 * np.sign(zb[1]))])  # crosses +-pi
+    cases = [
+        ("a sighting close to the prediction is kept (distance 2)", mean, cov, along_range(2.0), m),
+        ("distance 8 is kept (inside 9.21)", mean, cov, along_range(8.0), m),
+        ("distance 10 is rejected (outside 9.21)", mean, cov, along_range(10.0), m),
+        ("distance 40 is rejected", mean, cov, along_range(40.0), m),
+        ("a bearing 1.2 rad off is rejected, though the numbers are small",
+         mean, cov, landmark_measurement(mean, m) + [0.0, 1.2], m),
+        ("a very uncertain pose: 3.5 m off in range is kept", mean, np.diag([4.0, 4.0, 0.01]),
+         landmark_measurement(mean, m) + [3.5, 0.0], m),
+        ("a sure pose: the sensor noise Q sets the gate (30 cm off kept)", mean, tiny, along_range(2.25, tiny), m),
+        ("a landmark behind the robot (bearing near +-pi) is kept", behind_mean, cov, zb, behind_m),
+    ]
+    variants = {
+        "wrap": lambda c: d2(*c, wrap=False) <= gate,
+        "q": lambda c: d2(*c, with_q=False) <= gate,
+        "euclid": lambda c: d2(*c, euclid=True) <= gate,
+        "sqrt": lambda c: math.sqrt(d2(*c)) <= gate,
+        "1dof": lambda c: d2(*c) <= 6.63,
+        "3dof": lambda c: d2(*c) <= 11.34,
+        "inverted": lambda c: d2(*c) > gate,
+    }
+    hints = {
+        "wrap": "wrap the bearing innovation to [-pi, pi) before the distance: behind the robot z - z_hat is ~2 pi",
+        "q": "S = H cov H^T + Q: without the sensor noise Q a well-known pose rejects every reading",
+        "euclid": "use the Mahalanobis distance y^T S^-1 y, not y^T y: metres and radians need S to be compared",
+        "sqrt": "9.21 is a bound on the SQUARED distance y^T S^-1 y; do not take its square root",
+        "1dof": "a sighting has two numbers (range, bearing): the 99% gate is chi-square with 2 dof, 9.21 (not 6.63)",
+        "3dof": "a sighting has two numbers (range, bearing): the 99% gate is chi-square with 2 dof, 9.21 (not 11.34)",
+        "inverted": "return True to KEEP a sighting inside the gate (distance <= 9.21)",
+    }
+
+    def body(r: Report) -> None:
+        outs = []
+        for name, mu, c, z, lm in cases:
+            got = _call(r, name, fn, mu.copy(), c.copy(), np.asarray(z, float).copy(), lm.copy(), q.copy())
+            if not isinstance(got, (bool, np.bool_)) and not (np.ndim(got) == 0 and got in (0, 1)):
+                r.add(name, False, f"returned {got!r}", "return True (keep) or False (skip)",
+                      expected=str(d2(mu, c, z, lm, q) <= gate))
+                raise _Stop
+            outs.append(bool(got))
+        args = [(mu, c, z, lm, q) for _, mu, c, z, lm in cases]
+        wants = [d2(*a) <= gate for a in args]
+        hint = ""
+        if outs != wants:
+            hint = next((hints[k] for k, v in variants.items() if [v(a) for a in args] == outs),
+                        "y = z - z_hat (bearing wrapped); S = H cov H^T + Q; keep when y @ solve(S, y) <= 9.21")
+        for (name, *_), o, w, a in zip(cases, outs, wants, args):
+            r.add(name, o == w, f"{'kept' if o else 'rejected'}", hint,
+                  expected=f"{'kept' if w else 'rejected'} (y^T S^-1 y = {d2(*a):.2f})")
+
+    return _run("innovation_gate", body)

@@ -16,6 +16,11 @@ BOOK = ROOT / "book"
 NOTEBOOKS = sorted(BOOK.glob("[0-9][0-9]_*.ipynb"))
 
 
+def _twin(nb_path: Path) -> Path:
+    """The jupytext source of a chapter: book/src/NN_name.py (pyproject.toml's formats = "ipynb,src//py:percent")."""
+    return nb_path.parent / "src" / (nb_path.stem + ".py")
+
+
 def _cells(nb):
     out = []
     for c in nb.cells:
@@ -28,10 +33,27 @@ def test_there_are_notebooks():
     assert NOTEBOOKS, "book/ holds no NN_name.ipynb chapters"
 
 
+def test_each_chapter_is_listed_once_in_the_file_browser():
+    """The jupytext twins live in book/src/, not beside the notebooks a reader opens."""
+    beside = sorted(p.name for p in BOOK.glob("[0-9][0-9]_*.py"))
+    assert not beside, f"jupytext twins beside the notebooks: {beside}; they belong in book/src/ (git mv them)"
+    config = (ROOT / "pyproject.toml").read_text()
+    assert 'formats = "ipynb,src//py:percent"' in config, "pyproject.toml's [tool.jupytext] must pair into src/"
+
+
+@pytest.mark.parametrize("nb_path", NOTEBOOKS, ids=lambda p: p.name)
+def test_notebook_pairs_with_its_twin_in_src(nb_path):
+    """JupyterLab's jupytext follows the notebook's own pairing: saving a chapter updates book/src/, nothing else."""
+    formats = nbformat.read(nb_path, as_version=4).metadata.get("jupytext", {}).get("formats")
+    assert formats == "ipynb,src//py:percent", (
+        f"{nb_path.name} pairs as {formats!r}; rebuild with: python tools/build_notebooks.py {nb_path.relative_to(ROOT)}")
+
+
 @pytest.mark.parametrize("nb_path", NOTEBOOKS, ids=lambda p: p.name)
 def test_notebook_and_script_in_sync(nb_path):
-    py = nb_path.with_suffix(".py")
-    assert py.exists(), f"{nb_path.name} has no jupytext twin {py.name}; run: jupytext --to py:percent {nb_path}"
+    py = _twin(nb_path)
+    assert py.exists(), (f"{nb_path.name} has no jupytext twin {py.relative_to(ROOT)}; "
+                         f"run: jupytext --set-formats ipynb,src//py:percent {nb_path.relative_to(ROOT)}")
     nb_cells = _cells(jupytext.read(nb_path))
     py_cells = _cells(jupytext.read(py))
     assert len(nb_cells) == len(py_cells), (
@@ -50,7 +72,7 @@ def test_script_is_what_jupytext_writes_from_the_notebook(nb_path):
     # JupyterLab's jupytext refuses to open a notebook that is newer than its twin and differs
     # from it even in the order of a cell's metadata keys ("File Load Error ... is more recent
     # than"); a clone sets the files' times in any order, so the twin must be jupytext's own text
-    py = nb_path.with_suffix(".py")
+    py = _twin(nb_path)
     want = jupytext.writes(jupytext.read(nb_path), fmt="py:percent")
     assert py.read_text() == want, (
         f"{py.name} is not what jupytext writes from {nb_path.name}; "
@@ -129,8 +151,7 @@ def _hide_solutions():
 def test_solutions_hidden_in_jupyterlab_and_html_book(nb_path):
     """Code solutions open collapsed in JupyterLab (jupyter.source_hidden) and in the book (hide-cell)."""
     is_hidden = _hide_solutions().is_hidden
-    for which, nb in (("notebook", nbformat.read(nb_path, as_version=4)), ("twin", jupytext.read(nb_path.with_suffix(
-            ".py")))):
+    for which, nb in (("notebook", nbformat.read(nb_path, as_version=4)), ("twin", jupytext.read(_twin(nb_path)))):
         bad = [k for k, c in enumerate(nb.cells) if not is_hidden(c)]
         assert not bad, f"{nb_path.name} ({which}): solution cells {bad} are not hidden; run python tools/hide_solutions.py"
 

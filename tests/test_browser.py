@@ -175,6 +175,7 @@ def _stripped_copy(src: Path, dst: Path) -> None:
     nb.metadata.pop("jupytext", None)
     nbformat.write(nb, dst)
     dst.with_suffix(".py").unlink(missing_ok=True)
+    (dst.parent / "src" / (dst.stem + ".py")).unlink(missing_ok=True)   # the jupytext twin (book/src/)
 
 
 def _free_port() -> int:

@@ -551,3 +551,178 @@ def test_every_failure_with_a_seen_value_shows_the_expected_one():
         for v in r.failures:
             assert not v.detail or v.expected, f"{r.subject}: {v.name!r} shows {v.detail!r} without the expected value"
             assert "expected:" in str(r) or not v.detail
+
+
+# ------------------------------------------------------------------ older code exercises: ch. 1, 8, 9, 10
+def _predict_stop(mode="stop", mirror=False, sign=1, shift_first=False):
+    def fn(belief, kernel, offset):
+        belief = np.asarray(belief, float)
+        kernel = np.asarray(kernel, float)[::-1] if mirror else np.asarray(kernel, float)
+        offset = sign * offset
+        n, c = belief.size, kernel.size // 2
+        if mode == "wrap":
+            return discrete.predict(belief, kernel, offset=offset)
+        if shift_first:
+            shifted = np.zeros(n)
+            for src in range(n):
+                shifted[min(max(src + offset, 0), n - 1)] += belief[src]
+            belief, offset = shifted, 0
+        out = np.zeros(n)
+        for src in range(n):
+            for m, p in enumerate(kernel):
+                dst = src + offset + m - c
+                if mode == "stop":
+                    out[min(max(dst, 0), n - 1)] += belief[src] * p
+                elif 0 <= dst < n:
+                    out[dst] += belief[src] * p
+        return out / out.sum() if mode == "renormalise" else out
+
+    return fn
+
+
+def test_predict_stop():
+    assert check.predict_stop(_predict_stop())
+    fails_with(check.predict_stop(_predict_stop(mode="wrap")), "wraps around")
+    fails_with(check.predict_stop(_predict_stop(mode="lost")), "is lost")
+    fails_with(check.predict_stop(_predict_stop(mode="renormalise")), "renormalising")
+    fails_with(check.predict_stop(_predict_stop(shift_first=True)), "shifted first")
+    fails_with(check.predict_stop(_predict_stop(mirror=True)), "mirrored")
+    fails_with(check.predict_stop(_predict_stop(sign=-1)), "wrong way")
+
+    def in_place(belief, kernel, offset):
+        out = _predict_stop()(belief, kernel, offset)
+        belief[:] = out
+        return belief
+
+    fails_with(check.predict_stop(in_place), "new array")
+
+
+def test_predict_stop_matches_the_chapter_rule():
+    """The check's reference is discrete.predict's bounded mode plus the lost mass put back on the end cells."""
+    b = np.r_[np.zeros(7), 0.2, 0.3, 0.5]
+    k = np.array([0.1, 0.8, 0.1])
+    want = check._predict_stop_ref(b, k, 2)
+    lost = discrete.predict(b, k, offset=2, mode="constant")
+    np.testing.assert_allclose(want[:-1], lost[:-1], atol=1e-12)
+    assert want[-1] == pytest.approx(1.0 - lost[:-1].sum())
+
+
+def _kld(k_shift=0, only_on_new=False, use_n_min=True, lag=False, none_if_unmet=False):
+    from localize.kld import bin_keys, kld_bound
+
+    def fn(samples, bin_size, epsilon, delta, n_min):
+        seen, n = set(), 0
+        for key in bin_keys(samples, bin_size).tolist():
+            n += 1
+            new = key not in seen
+            if not lag:
+                seen.add(key)
+            k = len(seen) + k_shift
+            need = kld_bound(k, epsilon, delta) if k > 1 else 0.0
+            seen.add(key)
+            if only_on_new and not new:
+                continue
+            if n >= need and (n >= n_min or not use_n_min):
+                return n
+        return None if none_if_unmet else len(samples)
+
+    return fn
+
+
+def test_kld_loop():
+    assert check.kld_loop(_kld())
+    fails_with(check.kld_loop(_kld(k_shift=1)), "k - 1")
+    fails_with(check.kld_loop(_kld(only_on_new=True)), "after every sample")
+    fails_with(check.kld_loop(_kld(use_n_min=False)), "n >= n_min")
+    fails_with(check.kld_loop(_kld(lag=True)), "BEFORE testing the rule")
+    fails_with(check.kld_loop(_kld(none_if_unmet=True)), "one integer")
+
+
+def test_kld_loop_accepts_the_library_loop():
+    from localize.kld import kld_sample_size_loop
+
+    assert check.kld_loop(kld_sample_size_loop)
+
+
+def _xy_reader(reverse=True, mm=True, no_return=True, max_range=30.0, errors="format", line_base=1,
+               skip_blank_numbering=False, reverse_angles=False):
+    from pathlib import Path
+
+    from localize import io
+
+    def fn(path):
+        times, odo, ranges = [], [], []
+        lines = Path(path).read_text().splitlines()
+        numbered = ([(k, s) for k, s in enumerate([s for s in lines if s.strip()], start=line_base)]
+                    if skip_blank_numbering else list(enumerate(lines, start=line_base)))
+        for n, line in numbered:
+            tok = line.split()
+            if not tok:
+                continue
+            if ranges and len(tok) != 5 + len(ranges[0]) and errors != "none":
+                if errors == "format":
+                    raise io.FormatError(path, n, "wrong field count")
+                raise ValueError("wrong field count")
+            if ranges and len(tok) != 5 + len(ranges[0]):
+                continue
+            v = np.array(tok[1:], dtype=float)
+            times.append(v[0])
+            odo.append(v[1:4])
+            r = v[4:] / (1000.0 if mm else 1.0)
+            r = r[::-1] if reverse else r
+            ranges.append(np.where(r == 0, max_range, r) if no_return else r)
+        angles = np.linspace(-np.pi / 2, np.pi / 2, len(ranges[0]))
+        return io.LaserLog(times=times, odometry=odo, ranges=ranges, angles=angles[::-1] if reverse_angles else angles,
+                           max_range=30.0 if max_range < 30 else max_range, source=str(path), format="xy")
+
+    return fn
+
+
+def test_xy_reader():
+    assert check.xy_reader(_xy_reader())
+    fails_with(check.xy_reader(_xy_reader(reverse=False)), "wrong angles")
+    fails_with(check.xy_reader(_xy_reader(mm=False)), "millimetres")
+    fails_with(check.xy_reader(_xy_reader(no_return=False)), "no return, not an obstacle")
+    fails_with(check.xy_reader(_xy_reader(max_range=80.0)), "reaches 30 m")
+    fails_with(check.xy_reader(_xy_reader(reverse=False, reverse_angles=True)), "reverse the file's beam order")
+    fails_with(check.xy_reader(_xy_reader(errors="value")), "io.FormatError(path")
+    fails_with(check.xy_reader(_xy_reader(errors="none")), "number of fields")
+    fails_with(check.xy_reader(_xy_reader(line_base=0)), "count lines from 1")
+    fails_with(check.xy_reader(_xy_reader(skip_blank_numbering=True)), "blank lines")
+
+
+def _gate(wrap=True, with_q=True, euclid=False, sqrt=False, threshold=9.21, keep_inside=True):
+    from localize.ekf import landmark_jacobian, landmark_measurement
+
+    def fn(mean, cov, z, landmark, Q):
+        h = landmark_jacobian(mean, landmark)
+        s = h @ cov @ h.T + (Q if with_q else 0.0)
+        y = np.asarray(z, float) - landmark_measurement(mean, landmark)
+        if wrap:
+            y[1] = wrap_angle(y[1])
+        d2 = float(y @ y) if euclid else float(y @ np.linalg.solve(s, y))
+        inside = (math.sqrt(d2) if sqrt else d2) <= threshold
+        return inside if keep_inside else not inside
+
+    return fn
+
+
+def test_innovation_gate():
+    assert check.innovation_gate(_gate())
+    fails_with(check.innovation_gate(_gate(wrap=False)), "wrap the bearing innovation")
+    fails_with(check.innovation_gate(_gate(with_q=False)), "without the sensor noise Q")
+    fails_with(check.innovation_gate(_gate(euclid=True)), "Mahalanobis")
+    fails_with(check.innovation_gate(_gate(sqrt=True)), "SQUARED")
+    fails_with(check.innovation_gate(_gate(threshold=6.63)), "not 6.63")
+    fails_with(check.innovation_gate(_gate(threshold=11.34)), "not 11.34")
+    fails_with(check.innovation_gate(_gate(keep_inside=False)), "KEEP")
+
+
+def test_new_checks_show_the_expected_value_next_to_the_students():
+    reports = [check.predict_stop(_predict_stop(mode="lost")), check.kld_loop(_kld(k_shift=1)),
+               check.xy_reader(_xy_reader(mm=False)), check.innovation_gate(_gate(wrap=False))]
+    for r in reports:
+        assert not r, r
+        for v in r.failures:
+            assert v.expected, f"{r.subject}: {v.name!r} shows {v.detail!r} without the expected value"
+        assert "expected:" in str(r)

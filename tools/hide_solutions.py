@@ -1,6 +1,6 @@
 """Hide exercise solutions from the reader, in JupyterLab and in the HTML book, with a way to reveal them.
 
-    python tools/hide_solutions.py            # update book/NN_*.py and .ipynb in place
+    python tools/hide_solutions.py            # update book/NN_*.ipynb and book/src/NN_*.py in place
     python tools/hide_solutions.py --check    # exit 1 if a solution is not hidden
     python tools/hide_solutions.py 06_particle   # only the chapters whose names contain this
 
@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     for nb_path in sorted((ROOT / "book").glob("[0-9][0-9]_*.ipynb")):
         if only and not any(o in nb_path.name for o in only):
             continue
-        py_path = nb_path.with_suffix(".py")
+        py_path = nb_path.parent / "src" / (nb_path.stem + ".py")   # the jupytext twin
         nb = nbformat.read(nb_path, as_version=4)
         if "--check" in argv:
             bad += [f"{nb_path.name} cell {k}" for k, c in enumerate(nb.cells) if not is_hidden(c)]

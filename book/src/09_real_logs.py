@@ -1,7 +1,7 @@
 # ---
 # jupyter:
 #   jupytext:
-#     formats: ipynb,py:percent
+#     formats: ipynb,src//py:percent
 #     text_representation:
 #       extension: .py
 #       format_name: percent
@@ -921,9 +921,11 @@ print(section.strip() or "benchmarks/RESULTS.md has no bench_smooth section yet"
 #
 # **2 (implementation).** Write a reader for a made-up "XY log": each line is
 # `SCAN t x y theta r1 ... rn` with ranges in millimetres, beams from +90° down to
-# -90° (clockwise!) and 0 meaning "no return". Return an `io.LaserLog` in the
-# book's conventions, and reject a line with the wrong number of fields with
-# `io.FormatError(path, line, ...)`. Test it on a file you write yourself.
+# -90° (clockwise!) and 0 meaning "no return", from a scanner that reaches 30 m.
+# Return an `io.LaserLog` in the book's conventions, and reject a line with the
+# wrong number of fields with `io.FormatError(path, line, ...)`. Test it on a
+# file you write yourself, then with `check.xy_reader(read_xy_log)`, which
+# tries the traps (units, beam order, "no return", line numbers).
 #
 # **3 (experiment).** On the simulated log of this chapter, run global
 # localization (`cli.localize_log`, 1,000 particles, seeds 0 to 7) with
@@ -979,6 +981,7 @@ try:
     read_xy_log(xy)
 except io.FormatError as e:
     print("rejected:", hide(e))
+print(localize.check.xy_reader(read_xy_log))
 
 # %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)

@@ -1,7 +1,7 @@
 # ---
 # jupyter:
 #   jupytext:
-#     formats: ipynb,py:percent
+#     formats: ipynb,src//py:percent
 #     text_representation:
 #       extension: .py
 #       format_name: percent
@@ -386,7 +386,10 @@ plt.show()
 #    `[0.1, 0.8, 0.1]`; compute the prediction.
 # 2. **Implementation.** Write `predict_stop(belief, kernel, offset)` for a
 #    bounded hallway where a robot that would run past an end **stops at the end
-#    cell** instead of falling off. Check that it conserves mass.
+#    cell** instead of falling off. Check that it conserves mass, then test it
+#    with `localize.check.predict_stop(predict_stop)`: it tries both ends, a
+#    lopsided kernel and the classic slips (a hallway that wraps, mass that is
+#    lost or renormalised, shifting before blurring).
 # 3. **Experiment.** A robot starts in cell 0 and moves right one cell per
 #    cycle; its sensor is right 75 % of the time and the filter knows it. Over
 #    200 runs, how much belief lies within one cell of the true cell after
@@ -431,6 +434,7 @@ b = np.zeros(20)
 b[17:] = [0.2, 0.3, 0.5]
 moved = predict_stop(b, kernel, 2)
 print(moved[15:].round(3), "sum", round(float(moved.sum()), 6))
+print(localize.check.predict_stop(predict_stop))
 
 # %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)

@@ -1,7 +1,7 @@
 # ---
 # jupyter:
 #   jupytext:
-#     formats: ipynb,py:percent
+#     formats: ipynb,src//py:percent
 #     text_representation:
 #       extension: .py
 #       format_name: percent
@@ -461,10 +461,13 @@ plt.show()
 # on `w_avg = 0.01` at every step. Compute `w_slow`, `w_fast` and the injection
 # probability for the first three steps after the kidnapping.
 #
-# **2 (implementation).** Implement the KLD stopping rule as a loop over
-# particles (PR table 8.4, without the motion and sensor parts): draw
-# particles one at a time from a weighted set and stop when `n ≥ n(k)`.
-# Check your count against `localize.kld.kld_sample_size` on the particles of
+# **2 (implementation, self-checked).** Implement the KLD stopping rule as a
+# loop over particles (PR table 8.4, without the motion and sensor parts):
+# `kld_count(samples, bin_size, epsilon, delta, n_min)` walks through
+# candidate particles drawn one at a time from a weighted set and returns the
+# first `n` with `n ≥ n(k)` and `n ≥ n_min` (`k` the bins occupied so far; all
+# of them when no `n` qualifies). Test it with `check.kld_loop(kld_count)`, then
+# compare your count with `localize.kld.kld_sample_size` on the particles of
 # `tr_kld.snapshots[5]`.
 #
 # **3 (experiment).** In the symmetric hall (`tell=False`), use
@@ -489,17 +492,24 @@ for step in (1, 2, 3):
 # Exercise 2
 from localize.kld import bin_keys, kld_sample_size  # noqa: E402
 
+from localize import check  # noqa: E402
+
+
+def kld_count(samples, bin_size, epsilon=0.05, delta=0.01, n_min=100):
+    seen = set()
+    for n, key in enumerate(bin_keys(samples, bin_size).tolist(), start=1):
+        seen.add(key)                      # this sample's bin counts before the test
+        if n >= n_min and n >= kld_bound(len(seen), epsilon, delta):
+            return n
+    return len(samples)                    # the bound was never met: every draw is needed
+
+
+print(check.kld_loop(kld_count))
 p0, w0 = tr_kld.snapshots[5]
 rng = np.random.default_rng(0)
 draws = p0[rng.choice(len(p0), size=10_000, p=w0 / w0.sum())]
-keys = bin_keys(draws, (0.5, 0.5, np.radians(10)))
-seen, n_needed = set(), len(keys)          # if the bound is never met, every draw is needed
-for n, key in enumerate(keys.tolist(), start=1):
-    seen.add(key)
-    if n >= 300 and n >= kld_bound(len(seen)):
-        n_needed = n
-        break
-print("loop:", n_needed, " localize:", kld_sample_size(draws, (0.5, 0.5, np.radians(10)), n_min=300))
+print("loop:", kld_count(draws, (0.5, 0.5, np.radians(10)), n_min=300),
+      " localize:", kld_sample_size(draws, (0.5, 0.5, np.radians(10)), n_min=300))
 
 # %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
