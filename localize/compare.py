@@ -42,6 +42,7 @@ Errors, RMSE, NEES and its bounds come from :mod:`localize.metrics`.
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -644,7 +645,38 @@ def _metrics(runs: list, name: str) -> FilterMetrics:
                          final >= FAIL_THRESHOLD, np.array(sec))
 
 
-def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None, progress: bool = False) -> MonteCarlo:
+#: Worker pools of :func:`monte_carlo`, one per size, started once and reused (``spawn``: the workers
+#: are fresh interpreters, safe to start from a Jupyter kernel's threads on every platform).
+_POOLS: dict[int, Any] = {}
+
+
+def _pool(processes: int):
+    if processes not in _POOLS:
+        import atexit
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        _POOLS[processes] = pool = ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("spawn"),
+                                                       initializer=_quiet_worker)
+        atexit.register(pool.shutdown)
+    return _POOLS[processes]
+
+
+def _quiet_worker() -> None:
+    # Ctrl-C (or a Jupyter kernel's interrupt or shutdown) reaches the whole process group: the parent
+    # stops the pool; the workers must not print a KeyboardInterrupt traceback each
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _run_seed(args: tuple) -> Run:
+    sc, seed, filters, sensor_factory = args
+    return run_filters(sc, seed, filters, sensor_factory=sensor_factory)
+
+
+def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None, progress: bool = False,
+                processes: int | None = 1) -> MonteCarlo:
     """Run all ``filters`` on ``sc`` for every seed and collect the metrics.
 
     Parameters
@@ -659,16 +691,35 @@ def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None, progr
         Show a tqdm progress bar over the seeds (:func:`localize.metrics.progress`;
         in a notebook, keep it in a cell tagged ``nbval-ignore-output`` and
         ``remove-output``).
+    processes : int or None
+        Worker processes that share the seeds (``None``: one per CPU; default
+        1, no workers). Every seed is its own independent run, so the result
+        is the same for any number of processes (only the measured seconds
+        differ); ``sensor_factory`` must then be picklable (a module-level
+        function or class).
 
     Returns
     -------
     MonteCarlo
+
+    Examples
+    --------
+    >>> sc = scenario("tracking", n_steps=10)
+    >>> one = monte_carlo(sc, range(2), filters=("EKF",))
+    >>> two = monte_carlo(sc, range(2), filters=("EKF",), processes=2)
+    >>> bool(np.array_equal(one.metrics["EKF"].pos_err, two.metrics["EKF"].pos_err))
+    True
     """
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ValueError("seeds must name at least one seed")
-    runs = [run_filters(sc, s, filters, sensor_factory=sensor_factory)
-            for s in _metrics_mod.progress(seeds, progress, desc=f"scenario {sc.name}")]
+    n_proc = (os.cpu_count() or 1) if processes is None else check_count(processes, "processes")
+    jobs = [(sc, s, tuple(filters), sensor_factory) for s in seeds]
+    if n_proc > 1 and len(seeds) > 1:
+        results = _pool(n_proc).map(_run_seed, jobs)
+    else:
+        results = map(_run_seed, jobs)
+    runs = list(_metrics_mod.progress(results, progress, desc=f"scenario {sc.name}", total=len(seeds)))
     return MonteCarlo(sc, seeds, {n: _metrics(runs, n) for n in filters})
 
 
