@@ -118,6 +118,7 @@ DEFAULTS: dict[str, Any] = {
     "restart_after": 5,
     "min_ess": 0.0,
     "unknown_penalty": 1.0,
+    "expand": (0.2, 0.1),
 }
 
 
@@ -261,6 +262,9 @@ def localize_log(
     recovery_injection: float = 0.0,
     restart_after: int = 0,
     min_ess: float = 0.0,
+    odometry_outliers: float = 0.0,
+    min_trans: float = 1e-3,
+    expand: tuple[float, float] = (0.0, 0.0),
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
@@ -337,12 +341,22 @@ def localize_log(
     min_ess : float
         Adaptive tempering: no update leaves fewer than ``min_ess * N``
         effective particles (see :class:`~localize.mcl.MCL`).
+    odometry_outliers : float
+        Share of particles moved by an odometry outlier at each step (see
+        :class:`localize.mcl.RobustOdometry`); 0 uses the plain model.
+    min_trans : float
+        Odometry steps shorter than this (metres) count as turns on the spot
+        (no first rotation towards a direction the odometry noise made up;
+        ROS AMCL uses 0.01).
+    expand : (metres, radians)
+        Expansion resetting when the scans stop fitting an agreed cloud (see
+        :func:`localize.mcl.run_filter`); (0, 0) never.
 
     Returns
     -------
     RunResult
     """
-    from .mcl import MCL, run_filter
+    from .mcl import MCL, RobustOdometry, run_filter
 
     if rng is None or not isinstance(rng, np.random.Generator):
         raise TypeError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
@@ -356,7 +370,9 @@ def localize_log(
         params.setdefault("min_range", float(min_range))
     model = make_sensor(sensor, grid, mr, log.sensor_offset, temper=temper, **params)
     ranges = np.minimum(log.ranges, mr)
-    motion = ReversibleOdometry(alphas)
+    motion: Any = ReversibleOdometry(alphas, min_trans=min_trans)
+    if odometry_outliers:
+        motion = RobustOdometry(motion, outlier=odometry_outliers)
     opts: dict[str, Any] = dict(resample_threshold=resample_threshold, injection=injection,
                                 free_space_only=free_space_only, augmented=augmented, kld=kld,
                                 unknown_allowed=unknown_allowed, unknown_penalty=unknown_penalty, min_ess=min_ess)
@@ -375,7 +391,7 @@ def localize_log(
     tr = run_filter(f, k_scans, lambda k: (odo[k - 1], odo[k]), lambda k: (ranges[k], angles), grid=grid,
                     min_motion=tuple(min_motion), rules=rules, snapshot_steps=snap_steps,
                     snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
-                    restart_after=restart_after,
+                    restart_after=restart_after, expand=tuple(expand),
                     callback=None if progress is None else progress.update)
     spread = np.sqrt(tr.stds[:, 0] ** 2 + tr.stds[:, 1] ** 2)
     covs = np.zeros((k_scans, 3, 3))  # the particles' spread per scan (x, y, theta variances), for the result bag
@@ -796,6 +812,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="adaptive tempering: no single scan may leave fewer than F*N effective particles, so the "
                         "first scans cannot collapse the cloud onto a look-alike place (default "
                         f"{DEFAULTS['min_ess']:g}; 0 off). Example: --min-ess 0.1")
+    f.add_argument("--expand", type=_nonneg_float, nargs=2, default=DEFAULTS["expand"], metavar=("M", "RAD"),
+                   help="expansion resetting: when the cloud agrees on a place but the scan just used does not fit "
+                        "the map there, spread every particle by Gaussian noise of M metres and RAD radians, so "
+                        "that the next scans can find a robot that the odometry lost (wheel slip, a bump, odometry "
+                        "that misses the robot backing up -- the Freiburg 079 log's does) (default "
+                        f"{DEFAULTS['expand'][0]:g} {DEFAULTS['expand'][1]:g}; 0 0 never). Example: --expand 0 0")
     f.add_argument("--track", action="store_true",
                    help="pose tracking instead of global localization: start around the log's first reference "
                         "pose (needs a corrected log).")
@@ -888,7 +910,7 @@ def run_kwargs(args: argparse.Namespace) -> dict:
         injection=args.injection, temper=args.temper, sensor_params={"sigma_hit": args.sigma_hit},
         min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
         restart_after=max(int(args.restart_after), 0), min_ess=args.min_ess,
-        unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"],
+        unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"], expand=tuple(args.expand),
     )
 
 
