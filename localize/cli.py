@@ -117,7 +117,7 @@ DEFAULTS: dict[str, Any] = {
     "recovery": 0.0,
     "restart_after": 5,
     "min_ess": 0.0,
-    "unknown_penalty": 1.0,
+    "unknown_penalty": 0.0,
     "expand": (0.2, 0.1),
 }
 
