@@ -236,37 +236,42 @@ class RunResult:
 def localize_log(
     grid: OccupancyGrid,
     log,
-    n_particles: int = 5000,
+    n_particles: int = DEFAULTS["particles"],
     rng: np.random.Generator | None = None,
-    sensor: str = "likelihood",
-    alphas: Sequence[float] = (0.05, 0.01, 0.02, 0.05),
-    beams: int | None = 30,
-    max_range: float | None = 30.0,
+    sensor: str = DEFAULTS["sensor"],
+    alphas: Sequence[float] = DEFAULTS["alphas"],
+    beams: int | None = DEFAULTS["beams"],
+    max_range: float | None = DEFAULTS["max_range"],
     init: str = "global",
     init_std: Sequence[float] = (0.1, 0.1, 0.05),
-    min_motion: tuple[float, float] = (0.2, 0.3),
+    min_motion: tuple[float, float] = DEFAULTS["min_motion"],
     resample_threshold: float = 0.5,
-    injection: float = 0.0,
+    injection: float = DEFAULTS["injection"],
     free_space_only: bool = True,
-    temper: float = 0.05,
+    temper: float = DEFAULTS["temper"],
     snapshot_every: int = 0,
     snapshot_particles: int = 1000,
     progress: Progress | None = None,
     sensor_params: dict | None = None,
-    min_range: float = 0.0,
+    min_range: float = DEFAULTS["min_range"],
     augmented: Any = None,
-    kld: Any = None,
+    kld: Any = "default",
     rules: Any = None,
-    unknown_allowed: bool = False,
-    unknown_penalty: float = 0.0,
-    recovery_injection: float = 0.0,
-    restart_after: int = 0,
-    min_ess: float = 0.0,
+    unknown_allowed: bool = True,
+    unknown_penalty: float = DEFAULTS["unknown_penalty"],
+    recovery_injection: float = DEFAULTS["recovery"],
+    restart_after: int = DEFAULTS["restart_after"],
+    min_ess: float = DEFAULTS["min_ess"],
     odometry_outliers: float = 0.0,
     min_trans: float = 1e-3,
-    expand: tuple[float, float] = (0.0, 0.0),
+    expand: tuple[float, float] = DEFAULTS["expand"],
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
+
+    The keyword defaults are those of ``localize run`` (:data:`DEFAULTS`):
+    50,000 particles shrunk by KLD-sampling, ``sigma_hit`` 0.2 m, tempering
+    0.3, a 5 cm minimum range, particles allowed in unknown cells, restarts
+    and expansion resetting on.
 
     The filtering loop is :func:`localize.mcl.run_filter`, the one run driver
     (update gating, estimates, the searching / localized / lost state); this
@@ -323,8 +328,10 @@ def localize_log(
         field; AMCL's ``laser_min_range``).
     augmented : localize.mcl.Augmented or (alpha_slow, alpha_fast), optional
         Augmented MCL (random particles when the scans suddenly fit worse).
-    kld : localize.kld.KLDSampling, optional
+    kld : localize.kld.KLDSampling, "default" or None
         KLD-sampling: the particle count adapts to the spread of the belief.
+        ``"default"`` is the command line's (``epsilon`` 0.05, at least 2000
+        particles, at most ``n_particles``); None keeps the count fixed.
     rules : localize.mcl.StateRules, optional
         Thresholds of the honest state.
     unknown_allowed : bool
@@ -366,6 +373,14 @@ def localize_log(
         log = log.select_beams(count=beams)
     mr = log.max_range if max_range is None else min(float(max_range), log.max_range)
     params = dict(sensor_params or {})
+    params.setdefault("sigma_hit", DEFAULTS["sigma_hit"])
+    if isinstance(kld, str):
+        if kld != "default":
+            raise ValueError(f"kld must be a localize.kld.KLDSampling, 'default' or None; got {kld!r}")
+        from .kld import KLDSampling
+
+        kld = KLDSampling(epsilon=DEFAULTS["kld"], n_min=min(DEFAULTS["min_particles"], int(n_particles)),
+                          n_max=int(n_particles), chunked=True)
     if sensor == "likelihood" and min_range:
         params.setdefault("min_range", float(min_range))
     model = make_sensor(sensor, grid, mr, log.sensor_offset, temper=temper, **params)

@@ -1395,6 +1395,14 @@ class StateRules:
       likelihood field never checks whether a beam passed through a wall,
       and the ray cast does.
 
+    * the scan *pins* the pose: moved by ``probe_shift`` metres forwards,
+      backwards, left or right, the estimate must fit the scan worse by at
+      least ``min_contrast`` nats per valid beam (untempered log-likelihood
+      of the sensor model). In a featureless corridor a cloud can shrink
+      onto one stretch by resampling alone (KLD-sampling makes it small
+      enough for that), and every stretch fits equally well; this probe
+      says so. (Range scans and sensors with ``log_likelihood`` only.)
+
     ``restart_fit`` (below ``min_fit``) is the fit under which an agreed cloud
     counts as confidently wrong, for :func:`run_filter`'s ``restart_after``:
     the scans at the truth fit a degraded real map at 0.45-0.8 of the beams
@@ -1422,6 +1430,8 @@ class StateRules:
     fit_window: int = 5
     hold: int = 3
     hold_lost: int = 3
+    probe_shift: float = 1.0
+    min_contrast: float = 0.1
 
     def __post_init__(self) -> None:
         if min(int(self.min_beams), int(self.hold), int(self.hold_lost), int(self.fit_window)) < 1:
@@ -1837,6 +1847,8 @@ def run_filter(
                          and e.spread <= rules.max_spread
                          and (e.cluster_std is None or e.cluster_std[2] <= rules.max_heading_std)
                          and (np.isnan(fit_s) or fit_s >= rules.min_fit * fit_expected))
+            if confident and rules.probe_shift > 0 and _is_scan(z) and n_valid[k] > 0:
+                confident = _pinned(sensor, pose, z, rules.probe_shift, rules.min_contrast, int(n_valid[k]))
             if confident:
                 good += 1
                 bad = 0
@@ -1858,6 +1870,27 @@ def run_filter(
                               "did not fit the map at the agreed place"))
     return RunTrace(out["poses"], out["means"], out["stds"], spread, best, n_eff, n_p, n_inj, p_inj, updated,
                     resampled, degen, n_valid, fit, on_map, state, events, evals, seconds, snaps)
+
+
+def _pinned(sensor: Any, pose: NDArray, z: tuple, shift: float, min_contrast: float, n_valid: int) -> bool:
+    """Whether the scan ``z`` fits ``pose`` better than ``pose`` moved by ``shift`` in any of four directions.
+
+    The contrast is the drop of the sensor model's log-likelihood per valid
+    beam (the model's tempering undone); the pose is pinned when the smallest
+    drop is at least ``min_contrast``.
+    """
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    d = np.array([[0.0, 0.0], [shift, 0.0], [-shift, 0.0], [0.0, shift], [0.0, -shift]])
+    probes = np.tile(np.asarray(pose, dtype=float), (5, 1))
+    probes[:, 0] += c * d[:, 0] - s * d[:, 1]
+    probes[:, 1] += s * d[:, 0] + c * d[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ll = np.asarray(sensor.log_likelihood(probes, *z), dtype=float)
+    if ll.shape != (5,) or not np.isfinite(ll[0]):
+        return True                    # cannot probe: leave the decision to the other rules
+    temper = float(getattr(sensor, "temper", 1.0) or 1.0)
+    contrast = (ll[0] - np.max(np.where(np.isfinite(ll[1:]), ll[1:], -np.inf))) / (temper * max(n_valid, 1))
+    return bool(contrast >= min_contrast)
 
 
 def _now() -> float:
