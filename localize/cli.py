@@ -119,7 +119,8 @@ DEFAULTS: dict[str, Any] = {
     "recovery": 0.0,
     "restart_after": 5,
     "min_ess": 0.0,
-    "unknown_penalty": 1.0,
+    "unknown_penalty": 0.0,
+    "expand": (0.2, 0.1),
 }
 
 
@@ -232,34 +233,42 @@ class RunResult:
 def localize_log(
     grid: OccupancyGrid,
     log,
-    n_particles: int = 5000,
+    n_particles: int = DEFAULTS["particles"],
     rng: np.random.Generator | None = None,
-    sensor: str = "likelihood",
-    alphas: Sequence[float] = (0.05, 0.01, 0.02, 0.05),
-    beams: int | None = 30,
-    max_range: float | None = 30.0,
+    sensor: str = DEFAULTS["sensor"],
+    alphas: Sequence[float] = DEFAULTS["alphas"],
+    beams: int | None = DEFAULTS["beams"],
+    max_range: float | None = DEFAULTS["max_range"],
     init: str = "global",
     init_std: Sequence[float] = (0.1, 0.1, 0.05),
-    min_motion: tuple[float, float] = (0.2, 0.3),
+    min_motion: tuple[float, float] = DEFAULTS["min_motion"],
     resample_threshold: float = 0.5,
-    injection: float = 0.0,
+    injection: float = DEFAULTS["injection"],
     free_space_only: bool = True,
-    temper: float = 0.05,
+    temper: float = DEFAULTS["temper"],
     snapshot_every: int = 0,
     snapshot_particles: int = 1000,
     progress: Progress | None = None,
     sensor_params: dict | None = None,
-    min_range: float = 0.0,
+    min_range: float = DEFAULTS["min_range"],
     augmented: Any = None,
-    kld: Any = None,
+    kld: Any = "default",
     rules: Any = None,
-    unknown_allowed: bool = False,
-    unknown_penalty: float = 0.0,
-    recovery_injection: float = 0.0,
-    restart_after: int = 0,
-    min_ess: float = 0.0,
+    unknown_allowed: bool = True,
+    unknown_penalty: float = DEFAULTS["unknown_penalty"],
+    recovery_injection: float = DEFAULTS["recovery"],
+    restart_after: int = DEFAULTS["restart_after"],
+    min_ess: float = DEFAULTS["min_ess"],
+    odometry_outliers: float = 0.0,
+    min_trans: float = 1e-3,
+    expand: tuple[float, float] = DEFAULTS["expand"],
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
+
+    The keyword defaults are those of ``localize run`` (:data:`DEFAULTS`):
+    50,000 particles shrunk by KLD-sampling, ``sigma_hit`` 0.2 m, tempering
+    0.3, a 5 cm minimum range, particles allowed in unknown cells, restarts
+    and expansion resetting on.
 
     The filtering loop is :func:`localize.mcl.run_filter`, the one run driver
     (update gating, estimates, the searching / localized / lost state); this
@@ -316,8 +325,10 @@ def localize_log(
         field; AMCL's ``laser_min_range``).
     augmented : localize.mcl.Augmented or (alpha_slow, alpha_fast), optional
         Augmented MCL (random particles when the scans suddenly fit worse).
-    kld : localize.kld.KLDSampling, optional
+    kld : localize.kld.KLDSampling, "default" or None
         KLD-sampling: the particle count adapts to the spread of the belief.
+        ``"default"`` is the command line's (``epsilon`` 0.05, at least 2000
+        particles, at most ``n_particles``); None keeps the count fixed.
     rules : localize.mcl.StateRules, optional
         Thresholds of the honest state.
     unknown_allowed : bool
@@ -334,12 +345,22 @@ def localize_log(
     min_ess : float
         Adaptive tempering: no update leaves fewer than ``min_ess * N``
         effective particles (see :class:`~localize.mcl.MCL`).
+    odometry_outliers : float
+        Share of particles moved by an odometry outlier at each step (see
+        :class:`localize.mcl.RobustOdometry`); 0 uses the plain model.
+    min_trans : float
+        Odometry steps shorter than this (metres) count as turns on the spot
+        (no first rotation towards a direction the odometry noise made up;
+        ROS AMCL uses 0.01).
+    expand : (metres, radians)
+        Expansion resetting when the scans stop fitting an agreed cloud (see
+        :func:`localize.mcl.run_filter`); (0, 0) never.
 
     Returns
     -------
     RunResult
     """
-    from .mcl import MCL, run_filter
+    from .mcl import MCL, RobustOdometry, run_filter
 
     check_rng(rng)
     if init not in ("global", "reference"):
@@ -348,11 +369,21 @@ def localize_log(
         log = log.select_beams(count=beams)
     mr = log.max_range if max_range is None else min(float(max_range), log.max_range)
     params = dict(sensor_params or {})
+    params.setdefault("sigma_hit", DEFAULTS["sigma_hit"])
+    if isinstance(kld, str):
+        if kld != "default":
+            raise ValueError(f"kld must be a localize.kld.KLDSampling, 'default' or None; got {kld!r}")
+        from .kld import KLDSampling
+
+        kld = KLDSampling(epsilon=DEFAULTS["kld"], n_min=min(DEFAULTS["min_particles"], int(n_particles)),
+                          n_max=int(n_particles), chunked=True)
     if sensor == "likelihood" and min_range:
         params.setdefault("min_range", float(min_range))
     model = make_sensor(sensor, grid, mr, log.sensor_offset, temper=temper, **params)
     ranges = np.minimum(log.ranges, mr)
-    motion = ReversibleOdometry(alphas)
+    motion: Any = ReversibleOdometry(alphas, min_trans=min_trans)
+    if odometry_outliers:
+        motion = RobustOdometry(motion, outlier=odometry_outliers)
     opts: dict[str, Any] = dict(resample_threshold=resample_threshold, injection=injection,
                                 free_space_only=free_space_only, augmented=augmented, kld=kld,
                                 unknown_allowed=unknown_allowed, unknown_penalty=unknown_penalty, min_ess=min_ess)
@@ -371,7 +402,7 @@ def localize_log(
     tr = run_filter(f, k_scans, lambda k: (odo[k - 1], odo[k]), lambda k: (ranges[k], angles), grid=grid,
                     min_motion=tuple(min_motion), rules=rules, snapshot_steps=snap_steps,
                     snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
-                    restart_after=restart_after,
+                    restart_after=restart_after, expand=tuple(expand),
                     callback=None if progress is None else progress.update_to)
     return RunResult(times=np.asarray(log.times), trace=tr)
 
@@ -701,6 +732,11 @@ FILTER_OPTIONS: tuple[FilterOption, ...] = (
     FilterOption("--min-ess", _nonneg_float, metavar="F", help="""
         adaptive tempering: no single scan may leave fewer than F*N effective particles, so the first scans
         cannot collapse the cloud onto a look-alike place (default {default}; 0 off). Example: --min-ess 0.1"""),
+    FilterOption("--expand", _nonneg_float, 2, ("M", "RAD"), help="""
+        expansion resetting: when the cloud agrees on a place but the scan just used does not fit the map
+        there, spread every particle by Gaussian noise of M metres and RAD radians, so that the next scans can
+        find a robot that the odometry lost (wheel slip, a bump, odometry that misses the robot backing up --
+        the Freiburg 079 log's does) (default {default}; 0 0 never). Example: --expand 0 0"""),
 )
 
 
@@ -896,7 +932,7 @@ def run_kwargs(args: argparse.Namespace) -> dict:
         injection=args.injection, temper=args.temper, sensor_params={"sigma_hit": args.sigma_hit},
         min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
         restart_after=max(int(args.restart_after), 0), min_ess=args.min_ess,
-        unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"],
+        unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"], expand=tuple(args.expand),
     )
 
 

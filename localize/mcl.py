@@ -278,10 +278,13 @@ def _estimate(p: NDArray, w: NDArray, cluster_size: float, min_share: float, mas
     n_eff = float(1.0 / (w @ w))
 
     labels, n_lab = _cluster_labels(p[:, :2], w, cluster_size, mass)
-    if n_lab <= 1:
+    if n_lab == 0:
         return Estimate(mean.copy(), mean, std, cov, 1.0, 1, n_eff, std)
     inside = labels >= 0
     share = np.bincount(labels[inside], weights=w[inside], minlength=n_lab)
+    if n_lab == 1 and share[0] >= mass * (1.0 - 1e-9):
+        # one cluster that holds the weight the histogram was asked to cover: the belief is unimodal
+        return Estimate(mean.copy(), mean, std, cov, 1.0, 1, n_eff, std)
     best = int(np.argmax(share))
     sel = labels == best
     wb = w[sel] / share[best]
@@ -294,8 +297,9 @@ def _cluster_labels(xy: NDArray, w: NDArray, size: float, mass: float) -> tuple[
     """Cluster label (0..K-1, or -1 outside every cluster) of each weighted point.
 
     The points are binned into square cells of side ``size``; the heaviest
-    cells holding together ``mass`` of the weight are kept, and kept cells
-    that touch (8-neighbourhood) form one cluster.
+    cells holding together ``mass`` of the weight are kept (but none lighter
+    than 1% of the heaviest cell), and kept cells that touch
+    (8-neighbourhood) form one cluster.
     """
     from scipy.ndimage import label
 
@@ -312,7 +316,9 @@ def _cluster_labels(xy: NDArray, w: NDArray, size: float, mass: float) -> tuple[
     k = int(np.searchsorted(np.cumsum(cell_w[order]), mass * cell_w.sum())) + 1
     keep = np.zeros(cell_w.size, dtype=bool)
     keep[order[:k]] = True
-    keep &= cell_w > 0
+    # a thin veil of particles (random ones injected or drawn beside a converged cloud) must not join every
+    # hypothesis into one map-wide cluster: cells a hundred times lighter than the heaviest do not count
+    keep &= cell_w > max(0.01 * float(cell_w.max()), 0.0)
     lab, n = label(keep.reshape(shape), structure=np.ones((3, 3), dtype=bool))
     return lab.reshape(-1)[flat] - 1, int(n)
 
@@ -1056,6 +1062,81 @@ def mcl_step_loop(
 STATES = ("searching", "localized", "lost")
 
 
+class RobustOdometry:
+    """An odometry motion model with an outlier part: odometry that is plainly wrong now and then.
+
+    The textbook model (PR table 5.6) assumes the odometry is right up to a
+    few per cent. Real odometry fails outright: wheels slip, the robot is
+    pushed, and some robots' odometry reports the *speed* without its sign,
+    so that a robot backing out of a room seems to drive forward (the
+    Freiburg 079 log does this in about 100 of its steps). No particle then
+    follows the robot, and the scans cannot pull back a cloud that nowhere
+    covers the truth. So a share ``outlier`` of the particles (drawn afresh
+    at every step) moves by an odometry outlier instead: the reported
+    translation scaled by a factor uniform in ``[-scale, scale]`` (standing
+    still, backwards, too far), the reported rotation with noise of
+    ``rot_std`` rad plus 20% of the rotation. The rest moves by ``base``. The
+    scans decide which particles were right, as they always do; while the
+    odometry is fine the outliers are weighted away at no cost but the share.
+
+    Parameters
+    ----------
+    base : callable
+        The ordinary motion model ``base(poses, u, rng)`` (e.g. :class:`ReversibleOdometry`).
+    outlier : float
+        Share of particles moved by an outlier, in [0, 1).
+    scale : float
+        Largest factor on the reported translation (> 0).
+    rot_std : float
+        Rotation noise of an outlier (radians, >= 0).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> m = RobustOdometry(ReversibleOdometry((0.05, 0.01, 0.02, 0.05)), outlier=0.1)
+    >>> p = m(np.zeros((10000, 3)), ([0.0, 0.0, 0.0], [0.1, 0.0, 0.0]), rng)
+    >>> back = p[:, 0] < -0.05                  # moved backwards although the odometry said forwards
+    >>> bool(0.02 < back.mean() < 0.04), bool(np.median(p[:, 0]) > 0.09)
+    (True, True)
+    """
+
+    def __init__(self, base: Callable, outlier: float = 0.1, scale: float = 1.5, rot_std: float = 0.05) -> None:
+        if not callable(base):
+            raise TypeError(f"base must be a motion model base(poses, u, rng); got {type(base).__name__}")
+        if not 0.0 <= float(outlier) < 1.0:
+            raise ValueError(f"outlier must be a fraction in [0, 1); got {outlier!r}")
+        if not (np.isfinite(scale) and scale > 0):
+            raise ValueError(f"scale must be a positive number; got {scale!r}")
+        if not (np.isfinite(rot_std) and rot_std >= 0):
+            raise ValueError(f"rot_std must be a number of radians >= 0; got {rot_std!r}")
+        self.base, self.outlier, self.scale, self.rot_std = base, float(outlier), float(scale), float(rot_std)
+
+    @property
+    def alphas(self) -> Any:
+        return getattr(self.base, "alphas", None)
+
+    def __call__(self, poses: NDArray[np.float64], u: Any, rng: np.random.Generator) -> NDArray[np.float64]:
+        out = np.asarray(self.base(poses, u, rng), dtype=float)
+        pair = _odometry_pair(u)
+        if pair is None or self.outlier <= 0 or len(out) == 0:
+            return out
+        m = np.flatnonzero(rng.random(len(out)) < self.outlier)
+        if m.size == 0:
+            return out
+        dx, dy, dth = _relative(*pair)
+        s = rng.uniform(-self.scale, self.scale, m.size)
+        q = np.asarray(poses, dtype=float)[m]
+        c, sn = np.cos(q[:, 2]), np.sin(q[:, 2])
+        out = out.copy() if out is poses else out
+        out[m, 0] = q[:, 0] + s * (c * dx - sn * dy)
+        out[m, 1] = q[:, 1] + s * (sn * dx + c * dy)
+        out[m, 2] = wrap_angle(q[:, 2] + dth + rng.normal(0.0, self.rot_std + 0.2 * abs(dth), m.size))
+        return out
+
+    def __repr__(self) -> str:
+        return f"RobustOdometry({self.base!r}, outlier={self.outlier:g}, scale={self.scale:g})"
+
+
 @dataclass(frozen=True)
 class StateRules:
     """When the run driver calls the filter *localized*, *searching* or *lost*, from its own evidence.
@@ -1078,6 +1159,14 @@ class StateRules:
       that looks alike); the fit catches most of that, because the
       likelihood field never checks whether a beam passed through a wall,
       and the ray cast does.
+
+    * the scan *pins* the pose: moved by ``probe_shift`` metres forwards,
+      backwards, left or right, the estimate must fit the scan worse by at
+      least ``min_contrast`` nats per valid beam (untempered log-likelihood
+      of the sensor model). In a featureless corridor a cloud can shrink
+      onto one stretch by resampling alone (KLD-sampling makes it small
+      enough for that), and every stretch fits equally well; this probe
+      says so. (Range scans and sensors with ``log_likelihood`` only.)
 
     ``restart_fit`` (below ``min_fit``) is the fit under which an agreed cloud
     counts as confidently wrong, for :func:`run_filter`'s ``restart_after``:
@@ -1106,6 +1195,8 @@ class StateRules:
     fit_window: int = 5
     hold: int = 3
     hold_lost: int = 3
+    probe_shift: float = 1.0
+    min_contrast: float = 0.1
 
     def __post_init__(self) -> None:
         if min(int(self.min_beams), int(self.hold), int(self.hold_lost), int(self.fit_window)) < 1:
@@ -1272,6 +1363,7 @@ def run_filter(
     recover: bool = True,
     recovery_injection: float = 0.0,
     restart_after: int = 0,
+    expand: tuple[float, float] = (0.0, 0.0),
     odometry: ArrayLike | None = None,
     callback: Callable[[int], None] | None = None,
 ) -> RunTrace:
@@ -1337,6 +1429,16 @@ def run_filter(
         current cloud, each half of the weight: if the old place was right it
         keeps winning, if not the new particles find the robot. ``events``
         says so.
+    expand : (metres, radians)
+        Expansion resetting (Ueda et al. 2004): when the cloud has agreed on
+        one place but the scan just used does not fit the map there (its fit
+        below ``rules.restart_fit`` times the expected), every particle is
+        moved by Gaussian noise of these standard deviations. A tight cloud
+        that the odometry carried away from the robot (wheel slip, a bump,
+        odometry that misses that the robot backs up) cannot be pulled back by
+        the scans, since no particle is near the truth any more; spread a
+        little wider, the next scans find the robot again and the cloud
+        shrinks back. ``(0, 0)`` (default) never expands.
     odometry : array_like (T, 3), optional
         Odometry pose at each step, for the gating (default: the second pose of
         each odometry control).
@@ -1371,6 +1473,9 @@ def run_filter(
         raise ValueError(f"recovery_injection must be a fraction in [0, 1); got {recovery_injection!r}")
     base_injection = mcl.injection
     n_restart = mcl.kld.n_max if mcl.kld is not None else mcl.n
+    ex_xy, ex_th = (float(v) for v in expand)
+    if not (np.isfinite(ex_xy) and np.isfinite(ex_th) and ex_xy >= 0 and ex_th >= 0):
+        raise ValueError(f"expand must be two numbers >= 0 (metres, radians); got {expand!r}")
     poor = 0
     recent: list[float] = []
     fit_s = float("nan")
@@ -1409,6 +1514,7 @@ def run_filter(
     st = mcl.status
     cur = "searching"
     good = bad = 0
+    n_expanded = 0
     last_odom: NDArray | None = None
     t0 = _now()
     for k in range(t):
@@ -1466,6 +1572,12 @@ def run_filter(
             recent = (recent + [float(fit[k])])[-int(rules.fit_window):]
             fit_s = float(np.mean(recent))
             poor = poor + 1 if (agreed and fit_s < rules.restart_fit * fit_expected) else 0
+        if (ex_xy > 0 or ex_th > 0) and do_update and agreed and np.isfinite(fit[k]) and (
+                fit[k] < rules.restart_fit * fit_expected):
+            noise = mcl.rng.normal(0.0, 1.0, mcl.particles.shape) * np.array([ex_xy, ex_xy, ex_th])
+            mcl.particles = mcl.particles + noise
+            mcl.particles[:, 2] = wrap_angle(mcl.particles[:, 2])
+            n_expanded += 1
         if restart_after and poor >= restart_after and mcl.sampler is not None:
             # global localization again, without throwing the current hypothesis away: the old cloud keeps
             # half of the weight, n_restart uniform particles share the other half; the next scans decide
@@ -1504,6 +1616,8 @@ def run_filter(
                          and e.spread <= rules.max_spread
                          and (e.cluster_std is None or e.cluster_std[2] <= rules.max_heading_std)
                          and (np.isnan(fit_s) or fit_s >= rules.min_fit * fit_expected))
+            if confident and rules.probe_shift > 0 and _is_scan(z) and n_valid[k] > 0:
+                confident = _pinned(sensor, pose, z, rules.probe_shift, rules.min_contrast, int(n_valid[k]))
             if confident:
                 good += 1
                 bad = 0
@@ -1520,8 +1634,32 @@ def run_filter(
         if callback is not None:
             callback(k + 1)
     seconds = _now() - t0
+    if n_expanded:
+        events.append((t - 1, f"the cloud was spread wider (expansion resetting) at {n_expanded} updates whose scan "
+                              "did not fit the map at the agreed place"))
     return RunTrace(out["poses"], out["means"], out["stds"], spread, best, n_eff, n_p, n_inj, p_inj, updated,
                     resampled, degen, n_valid, fit, on_map, state, events, evals, seconds, snaps)
+
+
+def _pinned(sensor: Any, pose: NDArray, z: tuple, shift: float, min_contrast: float, n_valid: int) -> bool:
+    """Whether the scan ``z`` fits ``pose`` better than ``pose`` moved by ``shift`` in any of four directions.
+
+    The contrast is the drop of the sensor model's log-likelihood per valid
+    beam (the model's tempering undone); the pose is pinned when the smallest
+    drop is at least ``min_contrast``.
+    """
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    d = np.array([[0.0, 0.0], [shift, 0.0], [-shift, 0.0], [0.0, shift], [0.0, -shift]])
+    probes = np.tile(np.asarray(pose, dtype=float), (5, 1))
+    probes[:, 0] += c * d[:, 0] - s * d[:, 1]
+    probes[:, 1] += s * d[:, 0] + c * d[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ll = np.asarray(sensor.log_likelihood(probes, *z), dtype=float)
+    if ll.shape != (5,) or not np.isfinite(ll[0]):
+        return True                    # cannot probe: leave the decision to the other rules
+    temper = float(getattr(sensor, "temper", 1.0) or 1.0)
+    contrast = (ll[0] - np.max(np.where(np.isfinite(ll[1:]), ll[1:], -np.inf))) / (temper * max(n_valid, 1))
+    return bool(contrast >= min_contrast)
 
 
 def _now() -> float:
