@@ -120,7 +120,7 @@ DEFAULTS: dict[str, Any] = {
     "restart_after": 5,
     "min_ess": 0.0,
     "unknown_penalty": 0.0,
-    "expand": (0.2, 0.1),
+    "expand": (0.0, 0.0),
 }
 
 

@@ -179,12 +179,12 @@ def kld_sample_size(
 _RULE = inspect.signature(kld_sample_size)  # the arguments and defaults of both versions of the rule
 
 
-def kld_sample_size_loop(poses: ArrayLike, bin_size: ArrayLike, **rule: Any) -> int:
+def kld_sample_size_loop(poses: ArrayLike, bin_size: ArrayLike, *rule: Any, **rule_kw: Any) -> int:
     """The same rule as :func:`kld_sample_size`, written as the loop of PR table 8.4.
 
     Readable and slow: the test oracle for the vectorised version. It takes
-    :func:`kld_sample_size`'s arguments (``epsilon``, ``delta`` and ``n_min``
-    by keyword), with its defaults and its checks.
+    :func:`kld_sample_size`'s arguments (``epsilon``, ``delta`` and ``n_min``,
+    by position or keyword), with its defaults and its checks.
 
     Examples
     --------
@@ -193,7 +193,7 @@ def kld_sample_size_loop(poses: ArrayLike, bin_size: ArrayLike, **rule: Any) -> 
     >>> kld_sample_size_loop(p, (0.5, 0.5, 0.2)) == kld_sample_size(p, (0.5, 0.5, 0.2))
     True
     """
-    args = _RULE.bind(poses, bin_size, **rule)
+    args = _RULE.bind(poses, bin_size, *rule, **rule_kw)
     args.apply_defaults()
     keys, epsilon, delta, n_min = _rule_inputs(*args.args)
     occupied: set[int] = set()
