@@ -516,26 +516,21 @@ def odometry_pdf(fn: Callable) -> Report:
 
         elsewhere = ("your density already differs from the reference on the ordinary motion above: fix that "
                      "first; this case only adds {}")
-        # a motion whose headings cross the +-pi seam
-        prev2 = np.array([0.0, 0.0, 3.0])
-        seam = motion.sample_odometry(np.tile(prev2, (6, 1)), u, alphas, np.random.default_rng(12))
-        ref2 = motion.odometry_pdf(seam, u, prev2, alphas)
-        vals2 = single(prev2, u, seam)
-        ok2 = bool(np.allclose(vals2, ref2, rtol=1e-5, atol=1e-12))
-        r.add("angle differences are wrapped (headings cross +-pi)", ok2, _fixed(vals2),
-              "wrap every angle difference (rot1_hat - rot1 etc.) to [-pi, pi) before the Gaussian" if main_ok
-              else elsewhere.format("headings that cross the +-pi seam"), expected=_fixed(ref2))
-        # driving backwards: rot1 and rot2 near +-pi
-        u3 = (np.array([0.0, 0.0, -3.0]), np.array([0.8, 0.25, -3.05]))
-        prev3 = np.array([1.0, 1.0, 2.0])
-        back = motion.sample_odometry(np.tile(prev3, (6, 1)), u3, alphas, np.random.default_rng(13))
-        ref3 = motion.odometry_pdf(back, u3, prev3, alphas)
-        vals3 = single(prev3, u3, back)
-        ok3 = bool(np.allclose(vals3, ref3, rtol=1e-4, atol=1e-12))
-        r.add("a move backwards (rot1 near pi)", ok3, _fixed(vals3),
-              ("wrap rot1 = atan2(dy, dx) - theta and rot2 to [-pi, pi) for the measured AND the hypothesised "
-               "motion before computing variances and differences") if main_ok
-              else elsewhere.format("a backwards move"), expected=_fixed(ref3))
+        cases = [  # (what the case adds, odometry pair, previous pose, seed, rtol, the hint when it alone fails)
+            ("angle differences are wrapped (headings cross +-pi)", "headings that cross the +-pi seam",
+             u, np.array([0.0, 0.0, 3.0]), 12, 1e-5,
+             "wrap every angle difference (rot1_hat - rot1 etc.) to [-pi, pi) before the Gaussian"),
+            ("a move backwards (rot1 near pi)", "a backwards move",
+             (np.array([0.0, 0.0, -3.0]), np.array([0.8, 0.25, -3.05])), np.array([1.0, 1.0, 2.0]), 13, 1e-4,
+             "wrap rot1 = atan2(dy, dx) - theta and rot2 to [-pi, pi) for the measured AND the hypothesised "
+             "motion before computing variances and differences"),
+        ]
+        for name, what, u_c, prev_c, seed, rtol, fix in cases:
+            samples = motion.sample_odometry(np.tile(prev_c, (6, 1)), u_c, alphas, np.random.default_rng(seed))
+            ref_c = motion.odometry_pdf(samples, u_c, prev_c, alphas)
+            vals_c = single(prev_c, u_c, samples)
+            ok_c = bool(np.allclose(vals_c, ref_c, rtol=rtol, atol=1e-12))
+            r.add(name, ok_c, _fixed(vals_c), fix if main_ok else elsewhere.format(what), expected=_fixed(ref_c))
 
     return _run("odometry_pdf", body)
 

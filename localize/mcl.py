@@ -1235,8 +1235,31 @@ def expected_fit(sensor: Any, fit_distance: float) -> float:
     return float(z_hit) * erf(float(fit_distance) / (float(sigma) * sqrt(2.0)))
 
 
+class StateTrack:
+    """What every per-step record of a run answers from its ``poses`` and ``state`` arrays.
+
+    Shared by :class:`RunTrace` (one filter run) and
+    :class:`localize.smooth.Smoothed` (two passes combined).
+    """
+
+    poses: NDArray[np.float64]
+    state: NDArray[np.str_]
+
+    def __len__(self) -> int:
+        return int(self.poses.shape[0])
+
+    def first_localized(self) -> int | None:
+        """First step whose state is ``localized`` (None if never)."""
+        k = np.flatnonzero(self.state == "localized")
+        return int(k[0]) if k.size else None
+
+    def lost_intervals(self) -> list[tuple[int, int]]:
+        """``[(first, last), ...]`` steps of each stretch in state ``lost``."""
+        return _intervals(self.state == "lost")
+
+
 @dataclass(frozen=True, eq=False)
-class RunTrace:
+class RunTrace(StateTrack):
     """What :func:`run_filter` did at every step (one row per scan).
 
     Attributes
@@ -1289,17 +1312,6 @@ class RunTrace:
     seconds: float
     snapshots: dict = field(default_factory=dict)
 
-    def __len__(self) -> int:
-        return int(self.poses.shape[0])
-
-    def first_localized(self) -> int | None:
-        """First step whose state is ``localized`` (None if never)."""
-        k = np.flatnonzero(self.state == "localized")
-        return int(k[0]) if k.size else None
-
-    def lost_intervals(self) -> list[tuple[int, int]]:
-        """``[(first, last), ...]`` steps of each stretch in state ``lost``."""
-        return _intervals(self.state == "lost")
 
     def state_summary(self) -> dict:
         """The per-run account: first localized step, lost intervals, final state, share of time localized.

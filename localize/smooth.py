@@ -76,7 +76,7 @@ from ._checks import check_count, check_nonnegative, check_positive
 from .cli import RunResult, localize_log
 from .geometry import angle_diff, compose, relative, wrap_angle
 from .grid import OccupancyGrid
-from .mcl import RunTrace, _intervals, _now, _scan_fit
+from .mcl import RunTrace, StateTrack, _intervals, _now, _scan_fit
 
 __all__ = ["PASSES", "Smoothed", "SmoothResult", "reverse_log", "reverse_trace", "combine", "scan_fit_function",
            "smoothed_trace", "smooth_log", "headline"]
@@ -164,7 +164,7 @@ def scan_fit_function(grid: OccupancyGrid, log, fit_distance: float, min_range: 
 
 
 @dataclass(frozen=True, eq=False)
-class Smoothed:
+class Smoothed(StateTrack):
     """The combined trajectory of a forward and a backward pass (see the module's docstring).
 
     Attributes
@@ -206,12 +206,6 @@ class Smoothed:
     agree_heading: float = float(np.radians(10.0))
     from_backward: NDArray[np.bool_] | None = None
 
-    def __len__(self) -> int:
-        return int(self.poses.shape[0])
-
-    def first_localized(self) -> int | None:
-        k = np.flatnonzero(self.state == "localized")
-        return int(k[0]) if k.size else None
 
     def summary(self) -> dict:
         """The ``smooth`` section of ``summary.json``: which passes agree, where, and how disagreements were settled."""
