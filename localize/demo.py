@@ -43,16 +43,42 @@ DEMO_SENSOR_OFFSET = (0.25, 0.0, 0.0)
 
 @dataclass(frozen=True)
 class DemoData:
-    """What :func:`make_demo` wrote and the truth behind it."""
+    """What :func:`make_demo` wrote and the truth behind it.
+
+    Attributes
+    ----------
+    map_path, log_path, truth_path : Path
+        The files written: the map, the log and the true poses.
+    run : localize.sim.RangeRun
+        The simulated run the log was written from (the truth: ``times``,
+        ``poses`` and the ``world`` the scans were taken in are its).
+    grid : OccupancyGrid
+        The map written to ``map_path`` (coarser than the world, with the cupboard).
+    cupboard : ndarray, shape (4,)
+        The box ``(x0, y0, x1, y1)`` that the map shows and the world does not.
+    """
 
     map_path: Path
     log_path: Path
     truth_path: Path
-    times: NDArray[np.float64]
-    poses: NDArray[np.float64]
-    world: OccupancyGrid
+    run: sim.RangeRun
     grid: OccupancyGrid
     cupboard: NDArray[np.float64]
+
+    @property
+    def times(self) -> NDArray[np.float64]:
+        """Time of each scan (s): the run's."""
+        return self.run.times
+
+    @property
+    def poses(self) -> NDArray[np.float64]:
+        """True poses of the robot centre, shape (T, 3): the run's."""
+        return self.run.poses
+
+    @property
+    def world(self) -> OccupancyGrid:
+        """The world the scans were taken in: the run's."""
+        return self.run.world
 
 
 def make_demo(folder: PathLike, rng: np.random.Generator, steps: int = 150) -> DemoData:
@@ -93,6 +119,4 @@ def make_demo(folder: PathLike, rng: np.random.Generator, steps: int = 150) -> D
     log_path = sim.write_cmu_log(out / "robot.log", run)
     truth = write_tum(out / "truth.tum", run.times, run.poses,
                       comment="true poses of the simulated robot (localize demo)\ntimestamp x y z qx qy qz qw")
-    return DemoData(map_path=map_path, log_path=log_path, truth_path=truth, times=np.asarray(run.times),
-                    poses=np.asarray(run.poses), world=run.world, grid=grid,
-                    cupboard=boxes[0])
+    return DemoData(map_path=map_path, log_path=log_path, truth_path=truth, run=run, grid=grid, cupboard=boxes[0])

@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import os
 import shutil
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -247,17 +246,6 @@ def _choose(root: Path, topics: dict[str, str], types: Sequence[str], given: str
 
 
 # ============================================================================ reading
-@dataclass
-class _Scans:
-    stamps: NDArray[np.int64]
-    ranges: NDArray[np.float32]
-    angle_min: float
-    angle_increment: float
-    range_min: float
-    range_max: float
-    frame: str
-
-
 def _check_time(root: Path, topic: str, stamps: NDArray[np.int64]) -> None:
     d = np.diff(stamps)
     if np.any(d < 0):
