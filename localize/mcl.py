@@ -1235,14 +1235,30 @@ def expected_fit(sensor: Any, fit_distance: float) -> float:
     return float(z_hit) * erf(float(fit_distance) / (float(sigma) * sqrt(2.0)))
 
 
+@dataclass(frozen=True, eq=False, kw_only=True)
 class StateTrack:
-    """What every per-step record of a run answers from its ``poses`` and ``state`` arrays.
+    """The estimate and the state at every step of a run, and what they answer.
 
     Shared by :class:`RunTrace` (one filter run) and
-    :class:`localize.smooth.Smoothed` (two passes combined).
+    :class:`localize.smooth.Smoothed` (two passes combined); its fields are
+    given by keyword.
+
+    Attributes
+    ----------
+    poses : ndarray (T, 3)
+        The estimate at each step.
+    stds : ndarray (T, 3)
+        Spread of the particles behind it: standard deviations in x and y (m)
+        and the circular standard deviation of the heading (rad).
+    spread : ndarray (T,)
+        Position spread of the best cluster (m).
+    state : ndarray (T,) of str
+        ``searching``, ``localized`` or ``lost`` (see :class:`StateRules`).
     """
 
     poses: NDArray[np.float64]
+    stds: NDArray[np.float64]
+    spread: NDArray[np.float64]
     state: NDArray[np.str_]
 
     def __len__(self) -> int:
@@ -1258,9 +1274,9 @@ class StateTrack:
         return _intervals(self.state == "lost")
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class RunTrace(StateTrack):
-    """What :func:`run_filter` did at every step (one row per scan).
+    """What :func:`run_filter` did at every step (one row per scan); built by keyword.
 
     Attributes
     ----------
@@ -1291,10 +1307,7 @@ class RunTrace(StateTrack):
         ``step -> (particles, weights)`` after the update of that step.
     """
 
-    poses: NDArray[np.float64]
     means: NDArray[np.float64]
-    stds: NDArray[np.float64]
-    spread: NDArray[np.float64]
     best_weight: NDArray[np.float64]
     n_eff: NDArray[np.float64]
     n_particles: NDArray[np.int64]
@@ -1306,7 +1319,6 @@ class RunTrace(StateTrack):
     n_valid: NDArray[np.int64]
     fit: NDArray[np.float64]
     on_map: NDArray[np.float64]
-    state: NDArray[np.str_]
     events: list
     beam_evaluations: int
     seconds: float
@@ -1649,8 +1661,10 @@ def run_filter(
     if n_expanded:
         events.append((t - 1, f"the cloud was spread wider (expansion resetting) at {n_expanded} updates whose scan "
                               "did not fit the map at the agreed place"))
-    return RunTrace(out["poses"], out["means"], out["stds"], spread, best, n_eff, n_p, n_inj, p_inj, updated,
-                    resampled, degen, n_valid, fit, on_map, state, events, evals, seconds, snaps)
+    return RunTrace(poses=out["poses"], means=out["means"], stds=out["stds"], spread=spread, best_weight=best,
+                    n_eff=n_eff, n_particles=n_p, n_injected=n_inj, p_inject=p_inj, updated=updated,
+                    resampled=resampled, degenerate=degen, n_valid=n_valid, fit=fit, on_map=on_map, state=state,
+                    events=events, beam_evaluations=evals, seconds=seconds, snapshots=snaps)
 
 
 def _pinned(sensor: Any, pose: NDArray, z: tuple, shift: float, min_contrast: float, n_valid: int) -> bool:

@@ -119,6 +119,23 @@ def _inside_or_raise(grid: OccupancyGrid, poses: NDArray, outside: str) -> NDArr
 
 
 # -------------------------------------------------------------- the oracle
+def _axis_walk(g: float, cell: int, d: float) -> tuple[int, float, float]:
+    """One axis of the cell walk: ``(step, t_next, t_delta)``.
+
+    ``g`` is the sensor's coordinate along the axis in cell units, ``cell``
+    the index of the cell holding it and ``d`` the ray's direction along the
+    axis (``cos`` of its angle for x, ``sin`` for y). ``step`` is the index
+    change when the ray crosses a grid line of this axis (+1, -1, or 0 for a
+    ray parallel to them), ``t_next`` the distance along the ray (in cells)
+    to the first such line and ``t_delta`` the distance between two of them.
+    """
+    if d > 0:
+        return 1, (cell + 1 - g) / d, 1 / d
+    if d < 0:
+        return -1, (g - cell) / -d, -1 / d
+    return 0, math.inf, math.inf
+
+
 def cast_ray(grid: OccupancyGrid, x: float, y: float, angle: float, max_range: float) -> float:
     """Range along one ray by walking the grid cell by cell (Amanatides-Woo DDA).
 
@@ -164,22 +181,11 @@ def cast_ray(grid: OccupancyGrid, x: float, y: float, angle: float, max_range: f
         raise ValueError(f"the sensor position ({x:.3f}, {y:.3f}) lies outside the map")
     if obstacles[i, j]:
         return 0.0
-    dx, dy = math.cos(angle), math.sin(angle)
     limit = max_range / res
     # Distance t (along the ray, in cells) to the first vertical and the first
     # horizontal grid line, and between successive lines of each kind.
-    if dx > 0:
-        step_j, t_next_x, t_delta_x = 1, (j + 1 - gx) / dx, 1 / dx
-    elif dx < 0:
-        step_j, t_next_x, t_delta_x = -1, (gx - j) / -dx, -1 / dx
-    else:
-        step_j, t_next_x, t_delta_x = 0, math.inf, math.inf
-    if dy > 0:
-        step_i, t_next_y, t_delta_y = 1, (i + 1 - gy) / dy, 1 / dy
-    elif dy < 0:
-        step_i, t_next_y, t_delta_y = -1, (gy - i) / -dy, -1 / dy
-    else:
-        step_i, t_next_y, t_delta_y = 0, math.inf, math.inf
+    step_j, t_next_x, t_delta_x = _axis_walk(gx, j, math.cos(angle))
+    step_i, t_next_y, t_delta_y = _axis_walk(gy, i, math.sin(angle))
     while True:
         if t_next_x < t_next_y:  # cross a vertical line: next column
             t = t_next_x

@@ -45,7 +45,7 @@ world, which holds obstacles that the map given to the filter does not.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -61,6 +61,7 @@ from .maps import draw_box
 from .motion import move_velocity, sample_odometry, sample_velocity
 
 __all__ = [
+    "SimulatedRun",
     "RangeRun",
     "LandmarkRun",
     "CorridorRun",
@@ -83,18 +84,24 @@ DEFAULT_ODOMETRY_ALPHAS: tuple[float, float, float, float] = (0.02, 0.0005, 0.02
 
 
 
-def _readonly(*arrays: NDArray) -> None:
-    for a in arrays:
-        if isinstance(a, np.ndarray):
-            a.setflags(write=False)
+class _ReadOnly:
+    """Makes every array field of a simulated record read-only once it is built."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):  # type: ignore[arg-type]
+            a = getattr(self, f.name)
+            if isinstance(a, np.ndarray):
+                a.setflags(write=False)
 
 
 # =========================================================================
 # results
 # =========================================================================
-@dataclass(frozen=True, eq=False)
-class RangeRun:
-    """A simulated run of a robot with a range finder (arrays are read-only).
+@dataclass(frozen=True, eq=False, kw_only=True)
+class SimulatedRun(_ReadOnly):
+    """What every simulated run of a robot in the plane records (arrays are read-only); built by keyword.
+
+    Shared by :class:`RangeRun` and :class:`LandmarkRun`.
 
     Attributes
     ----------
@@ -106,6 +113,30 @@ class RangeRun:
         Odometry readings (robot centre) in the odometry frame. Its origin is
         arbitrary (``odometry[0]`` is not ``poses[0]``): only the motion
         between two readings carries information.
+    odometry_alphas : ndarray, shape (4,)
+        Odometry noise (PR alphas, variances) used for the readings.
+    dt : float
+        Seconds between steps.
+    """
+
+    times: NDArray[np.float64]
+    poses: NDArray[np.float64]
+    odometry: NDArray[np.float64]
+    odometry_alphas: NDArray[np.float64]
+    dt: float
+
+    def __len__(self) -> int:
+        return int(self.times.shape[0])
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class RangeRun(SimulatedRun):
+    """A simulated run of a robot with a range finder (arrays are read-only).
+
+    Attributes
+    ----------
+    times, poses, odometry, odometry_alphas, dt
+        See :class:`SimulatedRun`; :attr:`alphas` is ``odometry_alphas``.
     ranges : ndarray, shape (T, B)
         Scan at each step, metres; readings ``>= max_range`` mean "no return".
     angles : ndarray, shape (B,)
@@ -123,15 +154,10 @@ class RangeRun:
         obstacles (``clutter``).
     clutter : ndarray, shape (M, 4)
         Unmapped obstacles as boxes ``(x0, y0, x1, y1)`` in metres.
-    alphas : ndarray, shape (4,)
-        Odometry noise (PR alphas) used for the readings.
-    dt : float
-        Seconds between steps.
+    meta : dict
+        The path's ``radius`` and ``speed``.
     """
 
-    times: NDArray[np.float64]
-    poses: NDArray[np.float64]
-    odometry: NDArray[np.float64]
     ranges: NDArray[np.float64]
     angles: NDArray[np.float64]
     max_range: float
@@ -140,16 +166,12 @@ class RangeRun:
     grid: OccupancyGrid
     world: OccupancyGrid
     clutter: NDArray[np.float64]
-    alphas: NDArray[np.float64]
-    dt: float
     meta: dict = field(default_factory=dict)
 
-    def __post_init__(self) -> None:
-        _readonly(self.times, self.poses, self.odometry, self.ranges, self.angles, self.sensor_offset,
-                  self.kidnapped, self.clutter, self.alphas)
-
-    def __len__(self) -> int:
-        return int(self.times.shape[0])
+    @property
+    def alphas(self) -> NDArray[np.float64]:
+        """The odometry noise of the readings, :attr:`odometry_alphas` (PR alphas), for ``OdometryMotion(run.alphas)``."""
+        return self.odometry_alphas
 
     def control(self, k: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The odometry-model control ``u = (odometry[k-1], odometry[k])`` of the motion into step ``k``.
@@ -227,22 +249,19 @@ class RangeRun:
                 f"dt={self.dt:g} s, kidnappings={int(self.kidnapped.sum())}, clutter={len(self.clutter)})")
 
 
-@dataclass(frozen=True, eq=False)
-class LandmarkRun:
+@dataclass(frozen=True, eq=False, kw_only=True)
+class LandmarkRun(SimulatedRun):
     """A simulated run among point landmarks (arrays are read-only).
 
     Attributes
     ----------
-    times : ndarray, shape (T,)
-    poses : ndarray, shape (T, 3)
-        True poses.
+    times, poses, odometry, odometry_alphas, dt
+        See :class:`SimulatedRun` (the odometry is that of the true motion,
+        for filters that use the odometry model instead).
     controls : ndarray, shape (T, 2)
         Commanded ``(v, omega)`` of the motion *into* step ``k`` (row 0 is
         zero: nothing moves before the start). The true motion is the
         velocity model applied to this command (PR table 5.3).
-    odometry : ndarray, shape (T, 3)
-        Odometry readings of the true motion (arbitrary origin), for filters
-        that use the odometry model instead.
     landmarks : ndarray, shape (L, 2)
         Landmark positions; landmark ``j`` has id ``j``.
     steps, ids : ndarray of int, shape (K,)
@@ -250,33 +269,20 @@ class LandmarkRun:
     z : ndarray, shape (K, 2)
         Measured ``(range, bearing)`` of each sighting, bearing relative to
         the robot's heading, wrapped to ``[-pi, pi)``.
-    dt, sigma_range, sigma_bearing, max_range, fov : float
+    sigma_range, sigma_bearing, max_range, fov : float
     velocity_alphas : ndarray, shape (6,)
-    odometry_alphas : ndarray, shape (4,)
     """
 
-    times: NDArray[np.float64]
-    poses: NDArray[np.float64]
     controls: NDArray[np.float64]
-    odometry: NDArray[np.float64]
     landmarks: NDArray[np.float64]
     steps: NDArray[np.int64]
     ids: NDArray[np.int64]
     z: NDArray[np.float64]
-    dt: float
     sigma_range: float
     sigma_bearing: float
     max_range: float
     fov: float
     velocity_alphas: NDArray[np.float64]
-    odometry_alphas: NDArray[np.float64]
-
-    def __post_init__(self) -> None:
-        _readonly(self.times, self.poses, self.controls, self.odometry, self.landmarks, self.steps, self.ids,
-                  self.z, self.velocity_alphas, self.odometry_alphas)
-
-    def __len__(self) -> int:
-        return int(self.times.shape[0])
 
     def sightings(self, k: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """``(z, ids)`` of the sightings at step ``k``: shapes ``(K_k, 2)`` and ``(K_k,)``."""
@@ -715,7 +721,7 @@ def range_run(
     return RangeRun(
         times=np.arange(n_steps) * dt, poses=poses, odometry=odometry, ranges=ranges, angles=ang,
         max_range=max_range, sensor_offset=offset, kidnapped=kidnapped, grid=grid, world=world,
-        clutter=boxes, alphas=alphas, dt=dt, meta={"radius": radius, "speed": speed},
+        clutter=boxes, odometry_alphas=alphas, dt=dt, meta={"radius": radius, "speed": speed},
     )
 
 
@@ -881,7 +887,7 @@ def write_cmu_log(path: str | os.PathLike, run: RangeRun, decimals: int = 3, odo
 # 1-D corridor
 # =========================================================================
 @dataclass(frozen=True, eq=False)
-class CorridorRun:
+class CorridorRun(_ReadOnly):
     """A robot on a ring corridor of ``length`` metres with doors (arrays read-only).
 
     Position ``x`` lives on the circle ``[0, length)``; the doors are the
@@ -910,9 +916,6 @@ class CorridorRun:
     sigma_move: float
     p_hit: float
     p_false: float
-
-    def __post_init__(self) -> None:
-        _readonly(self.positions, self.controls, self.z, self.doors)
 
     def __len__(self) -> int:
         return int(self.positions.shape[0])

@@ -163,9 +163,9 @@ def scan_fit_function(grid: OccupancyGrid, log, fit_distance: float, min_range: 
     return fit
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Smoothed(StateTrack):
-    """The combined trajectory of a forward and a backward pass (see the module's docstring).
+    """The combined trajectory of a forward and a backward pass (see the module's docstring); built by keyword.
 
     Attributes
     ----------
@@ -193,10 +193,6 @@ class Smoothed(StateTrack):
         Scans whose estimate is the backward pass's alone.
     """
 
-    poses: NDArray[np.float64]
-    stds: NDArray[np.float64]
-    spread: NDArray[np.float64]
-    state: NDArray[np.str_]
     passes: NDArray[np.str_]
     source: NDArray[np.str_]
     forward: RunTrace
@@ -264,16 +260,11 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
 
     Examples
     --------
-    >>> import numpy as np
-    >>> from localize.mcl import MCL, run_filter
-    >>> from localize.maps import office
-    >>> from localize.sensors import LikelihoodField
-    >>> g = office()
-    >>> lf = LikelihoodField(g, 8.0, sigma_hit=0.2, temper=0.2)
-    >>> rng = np.random.default_rng(1)
-    >>> angles = np.linspace(-np.pi / 2, np.pi / 2, 37)
-    >>> z = lf.sample(np.array([[3.0, 3.0, 1.0]]), angles, rng)[0]
-    >>> f = run_filter(MCL.uniform(g, 3000, (0.0,) * 4, lf, rng=rng), 10, lambda k: None, lambda k: (z, angles))
+    A pass of the doctests' toy filter (``toy_mcl``: particles on a line, a
+    GPS that reads x = 5 m at every step):
+
+    >>> from localize.mcl import run_filter
+    >>> f = run_filter(toy_mcl(), 10, lambda k: None, lambda k: (5.0,))
     >>> [str(v) for v in f.state[:2]]                # a pass needs a few scans to localize
     ['searching', 'searching']
     >>> from dataclasses import replace
@@ -421,8 +412,9 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
     state = np.where(loc, "localized", "searching").astype("<U9")
     seen = np.cumsum(loc) > 0
     state[~loc & seen] = "lost"
-    return Smoothed(poses, stds, spread, state, passes, source, forward, backward, disagreements,
-                    float(d_max), float(a_max), take_b & ~agree)
+    return Smoothed(poses=poses, stds=stds, spread=spread, state=state, passes=passes, source=source,
+                    forward=forward, backward=backward, disagreements=disagreements, agree_distance=float(d_max),
+                    agree_heading=float(a_max), from_backward=take_b & ~agree)
 
 
 def _continue(p: NDArray, odo: NDArray, scans: NDArray, a: int, b: int) -> NDArray:

@@ -23,10 +23,12 @@ def _trace(poses, state, spread=None) -> RunTrace:
     p = np.asarray(poses, dtype=float)
     t = len(p)
     z = np.zeros(t)
-    return RunTrace(p, p.copy(), np.full((t, 3), 0.1), np.full(t, 0.1) if spread is None else np.asarray(spread),
-                    np.ones(t), z + 100, np.full(t, 100), np.zeros(t, int), z.copy(), np.ones(t, bool),
-                    np.zeros(t, bool), np.zeros(t, bool), np.full(t, 30), np.full(t, np.nan), np.ones(t),
-                    np.asarray(state, dtype="<U9"), [], 0, 0.0)
+    return RunTrace(poses=p, means=p.copy(), stds=np.full((t, 3), 0.1),
+                    spread=np.full(t, 0.1) if spread is None else np.asarray(spread), best_weight=np.ones(t),
+                    n_eff=z + 100, n_particles=np.full(t, 100), n_injected=np.zeros(t, int), p_inject=z.copy(),
+                    updated=np.ones(t, bool), resampled=np.zeros(t, bool), degenerate=np.zeros(t, bool),
+                    n_valid=np.full(t, 30), fit=np.full(t, np.nan), on_map=np.ones(t),
+                    state=np.asarray(state, dtype="<U9"), events=[], beam_evaluations=0, seconds=0.0)
 
 
 def _office_log(seed: int, n: int = 40) -> tuple[LaserLog, np.ndarray]:

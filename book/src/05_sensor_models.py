@@ -60,7 +60,7 @@ from localize import maps
 from localize.beam_learning import fit_beam_model
 from localize.plot import draw_map, draw_robot
 from localize.plot.sensors import plot_beam_pdf, plot_likelihood_field, plot_ranges, plot_scan_on_map
-from localize.raycast import RayCaster, cast, cast_ray
+from localize.raycast import RayCaster, _axis_walk, cast, cast_ray
 from localize.sensors import BeamModel, LandmarkModel, LikelihoodField, select_beams
 from localize.widgets.sensors import (
     beam_density_widget,
@@ -147,9 +147,13 @@ print("unknown cell transparent     ->", f"{cast(transparent, [1.5, 1.5, 0.0], [
 # next vertical and to the next horizontal line, and always steps across the
 # nearer one. Each step costs an addition and a comparison, and the walk
 # visits exactly the cells the ray passes through. This is the readable
-# version in `localize`, one ray at a time:
+# version in `localize`, one ray at a time. Setting up the walk is the same
+# for both axes (which way the index steps, how far to the first grid line,
+# how far between lines), so one small function does it, once for x with
+# $\cos\phi$ and once for y with $\sin\phi$:
 
 # %%
+print(inspect.getsource(_axis_walk))
 source = inspect.getsource(cast_ray)
 print(source.splitlines()[0])
 print('    """(docstring omitted)"""' + source.split('"""')[2])
