@@ -59,6 +59,7 @@ from .io import cmu as _cmu
 from .io.cmu import CMU_ANGLES  # re-exported: the CMU scanner's 180 beams, the default of range_run
 from .maps import draw_box
 from .motion import move_velocity, sample_odometry, sample_velocity
+from .sensors import range_bearing
 
 __all__ = [
     "SimulatedRun",
@@ -833,10 +834,9 @@ def landmark_run(
         else:
             poses[k] = move_velocity(poses[k - 1], u[k, 0], u[k, 1], dt)
     odometry = odometry_readings(poses, odometry_alphas, rng)
-    # sightings
-    d = lm[None, :, :] - poses[:, None, :2]                     # (T, L, 2)
-    rng_true = np.hypot(d[..., 0], d[..., 1])
-    bearing_true = wrap_angle(np.arctan2(d[..., 1], d[..., 0]) - poses[:, None, 2])
+    # sightings: the landmark model's noise-free (range, bearing) of every landmark at every step, (T, L, 2)
+    true_z = range_bearing(poses[:, None, :], lm[None, :, :])
+    rng_true, bearing_true = true_z[..., 0], true_z[..., 1]
     visible = (rng_true <= max_range) & (np.abs(bearing_true) <= fov / 2)
     steps, ids = np.nonzero(visible)
     noise = rng.standard_normal((steps.size, 2))
