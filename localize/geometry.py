@@ -29,6 +29,8 @@ __all__ = [
     "circular_mean",
     "circular_std",
     "mean_pose",
+    "yaw_to_quaternion",
+    "quaternion_to_yaw",
 ]
 
 TWO_PI = 2.0 * np.pi
@@ -314,3 +316,32 @@ def mean_pose(poses: ArrayLike, weights: ArrayLike | None = None) -> NDArray[np.
     xy = np.average(p[:, :2], axis=0, weights=w)
     th = circular_mean(p[:, 2], weights=w)
     return np.array([xy[0], xy[1], th])
+
+
+# ------------------------------------------------------------ quaternions (ROS messages, TUM files)
+def yaw_to_quaternion(theta: ArrayLike) -> NDArray[np.float64]:
+    """Quaternions ``(qx, qy, qz, qw)`` of rotations by ``theta`` about z, shape ``(..., 4)``.
+
+    Examples
+    --------
+    >>> yaw_to_quaternion(np.pi / 2).round(6)
+    array([0.      , 0.      , 0.707107, 0.707107])
+    """
+    t = np.asarray(theta, dtype=float)
+    out = np.zeros(t.shape + (4,))
+    out[..., 2] = np.sin(t / 2)
+    out[..., 3] = np.cos(t / 2)
+    return out
+
+
+def quaternion_to_yaw(q: ArrayLike) -> NDArray[np.float64]:
+    """Heading (rotation about z, radians in [-pi, pi)) of quaternions ``(qx, qy, qz, qw)``.
+
+    Examples
+    --------
+    >>> round(float(quaternion_to_yaw(yaw_to_quaternion(-2.0))), 12)
+    -2.0
+    """
+    q = np.asarray(q, dtype=float)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return wrap_angle(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))

@@ -50,7 +50,7 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..geometry import wrap_angle
+from ..geometry import quaternion_to_yaw, wrap_angle, yaw_to_quaternion
 from ._common import FormatError, LaserLog
 
 __all__ = ["is_rosbag", "bag_topics", "read_rosbag", "write_rosbag_log", "write_result_bag", "BAG_FORMATS",
@@ -81,34 +81,6 @@ def _rosbags():
 
 
 # ============================================================================ small helpers
-def yaw_to_quaternion(theta: ArrayLike) -> NDArray[np.float64]:
-    """Quaternions ``(qx, qy, qz, qw)`` of rotations by ``theta`` about z, shape ``(..., 4)``.
-
-    Examples
-    --------
-    >>> yaw_to_quaternion(np.pi / 2).round(6)
-    array([0.      , 0.      , 0.707107, 0.707107])
-    """
-    t = np.asarray(theta, dtype=float)
-    out = np.zeros(t.shape + (4,))
-    out[..., 2] = np.sin(t / 2)
-    out[..., 3] = np.cos(t / 2)
-    return out
-
-
-def quaternion_to_yaw(q: ArrayLike) -> NDArray[np.float64]:
-    """Heading (rotation about z, radians in [-pi, pi)) of quaternions ``(qx, qy, qz, qw)``.
-
-    Examples
-    --------
-    >>> round(float(quaternion_to_yaw(yaw_to_quaternion(-2.0))), 12)
-    -2.0
-    """
-    q = np.asarray(q, dtype=float)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return wrap_angle(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
-
-
 def _rotation(q: Sequence[float]) -> NDArray[np.float64]:
     x, y, z, w = (float(v) for v in q)
     n = np.sqrt(x * x + y * y + z * z + w * w)

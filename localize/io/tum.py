@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..geometry import as_poses, wrap_angle
+from ..geometry import as_poses, quaternion_to_yaw, yaw_to_quaternion
 from ._common import FormatError
 
 __all__ = ["write_tum", "read_tum"]
@@ -54,11 +54,10 @@ def write_tum(path: PathLike, times: ArrayLike, poses: ArrayLike, comment: str |
         raise ValueError("times and poses must be finite to be written as a TUM trajectory")
     out = Path(path)
     lines = [f"# {c}" for c in (comment.splitlines() if comment else [])]
-    half = p[:, 2] / 2
-    qz, qw = np.sin(half), np.cos(half)
+    q = yaw_to_quaternion(p[:, 2])
     for k in range(t.size):
         lines.append(f"{t[k]:.9f} {p[k, 0]:.6f} {p[k, 1]:.6f} 0.000000 0.000000000 0.000000000 "
-                     f"{qz[k]:.9f} {qw[k]:.9f}")
+                     f"{q[k, 2]:.9f} {q[k, 3]:.9f}")
     out.write_text("\n".join(lines) + "\n")
     return out
 
@@ -98,5 +97,5 @@ def read_tum(path: PathLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     if np.any(tilt > np.radians(1.0)):
         k = int(np.argmax(tilt))
         raise FormatError(p, lines[k], f"the pose is tilted {np.degrees(tilt[k]):.1f} degrees; expected planar poses")
-    yaw = wrap_angle(np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy**2 + qz**2)))
+    yaw = quaternion_to_yaw(a[:, 4:8])
     return a[:, 0], np.column_stack([a[:, 1], a[:, 2], yaw])
