@@ -95,6 +95,14 @@ class _ReadOnly:
                 a.setflags(write=False)
 
 
+def _motion_step(k: int, n: int) -> int:
+    """``k`` as the index of the motion into step ``k`` of an ``n``-step run: 1 .. n-1 (step 0 has none)."""
+    k = int(k)
+    if not 1 <= k < n:
+        raise ValueError(f"k must be in [1, {n - 1}] (step 0 has no motion); got {k}")
+    return k
+
+
 # =========================================================================
 # results
 # =========================================================================
@@ -185,9 +193,7 @@ class RangeRun(SimulatedRun):
         >>> bool(np.array_equal(now, run.odometry[2]))
         True
         """
-        k = int(k)
-        if not 1 <= k < len(self):
-            raise ValueError(f"k must be in [1, {len(self) - 1}] (step 0 has no motion); got {k}")
+        k = _motion_step(k, len(self))
         return self.odometry[k - 1], self.odometry[k]
 
     @property
@@ -934,9 +940,7 @@ class CorridorRun(_ReadOnly):
         >>> bool(run.control(1) == run.controls[1])
         True
         """
-        k = int(k)
-        if not 1 <= k < len(self):
-            raise ValueError(f"k must be in [1, {len(self) - 1}] (step 0 has no motion); got {k}")
+        k = _motion_step(k, len(self))
         return float(self.controls[k])
 
     def at_door(self, x: ArrayLike) -> NDArray[np.bool_]:
