@@ -70,12 +70,31 @@ def toy_mcl():
     return MCL(particles, shift, GPS(0.5), rng=np.random.default_rng(0))
 
 
+def temporary_files(factory: pytest.TempPathFactory):
+    """The doctests' temporary files, ``(tmp_dir, tmp_text)``, made under pytest's temporary folder ``factory``
+    (which keeps the last three runs and removes older ones)."""
+
+    def tmp_dir() -> Path:
+        """A fresh empty folder, for an example that writes files of its own."""
+        return factory.mktemp("doctest")
+
+    def tmp_text(name: str, text: str) -> Path:
+        """The file ``name`` in a fresh folder, holding ``text``: the input of a reader's example."""
+        p = tmp_dir() / name
+        p.write_text(text)
+        return p
+
+    return tmp_dir, tmp_text
+
+
 @pytest.fixture(autouse=True)
-def _doctest_namespace(doctest_namespace):
-    """Doctests in localize see numpy as ``np``, and the toy filter of the MCL examples (``GPS``, ``toy_mcl``)."""
+def _doctest_namespace(doctest_namespace, tmp_path_factory):
+    """Doctests in localize see numpy as ``np``, the toy filter of the MCL examples (``GPS``, ``toy_mcl``),
+    and the temporary files of the reader and writer examples (``tmp_dir``, ``tmp_text``)."""
     doctest_namespace["np"] = np
     doctest_namespace["GPS"] = GPS
     doctest_namespace["toy_mcl"] = toy_mcl
+    doctest_namespace["tmp_dir"], doctest_namespace["tmp_text"] = temporary_files(tmp_path_factory)
 
 
 # The book's .py files (book/src/) are jupytext twins of the notebooks, not modules:

@@ -24,8 +24,7 @@
 
 Examples
 --------
->>> import tempfile, pathlib
->>> d = pathlib.Path(tempfile.mkdtemp()) / "out"
+>>> d = tmp_dir() / "out"
 >>> with RunOutput(d) as o:
 ...     _ = o.open()                # checks and locks the folder
 ...     _ = o.path("trajectory.csv").write_text("time,x,y,theta\\n")

@@ -222,10 +222,8 @@ def read_amcl_params(path: PathLike) -> AmclMapping:
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "amcl.yaml"
-    >>> _ = p.write_text("amcl:\\n  ros__parameters:\\n    max_particles: 3000\\n    min_particles: 3000\\n"
-    ...                  "    base_frame_id: base_link\\n")
+    >>> p = tmp_text("amcl.yaml", "amcl:\\n  ros__parameters:\\n    max_particles: 3000\\n    min_particles: 3000\\n"
+    ...              "    base_frame_id: base_link\\n")
     >>> m = read_amcl_params(p)
     >>> m.settings["particles"], m.settings["kld"]
     (3000, None)

@@ -95,8 +95,7 @@ def make_demo(folder: PathLike, rng: np.random.Generator, steps: int = 150) -> D
 
     Examples
     --------
-    >>> import tempfile
-    >>> d = make_demo(tempfile.mkdtemp(), np.random.default_rng(0), steps=5)
+    >>> d = make_demo(tmp_dir(), np.random.default_rng(0), steps=5)
     >>> d.map_path.name, d.log_path.name, d.poses.shape
     ('map.dat', 'robot.log', (5, 3))
     >>> from localize import io

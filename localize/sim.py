@@ -876,10 +876,9 @@ def write_cmu_log(path: str | os.PathLike, run: RangeRun, decimals: int = 3, odo
 
     Examples
     --------
-    >>> import tempfile, pathlib
     >>> from localize.maps import office
     >>> run = range_run(office(), np.random.default_rng(2), n_steps=3, sensor_offset=(0.25, 0, 0), sensor="ideal")
-    >>> p = write_cmu_log(pathlib.Path(tempfile.mkdtemp()) / "sim.log", run)
+    >>> p = write_cmu_log(tmp_dir() / "sim.log", run)
     >>> lines = p.read_text().splitlines()
     >>> len(lines), lines[1].split()[0], len(lines[1].split())
     (6, 'L', 188)

@@ -136,8 +136,8 @@ def open_text(path: PathLike) -> _io.TextIOBase:
 
     Examples
     --------
-    >>> import tempfile, gzip, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "x.log"     # no .gz suffix needed
+    >>> import gzip
+    >>> p = tmp_dir() / "x.log"     # no .gz suffix needed
     >>> with gzip.open(p, "wt") as f:
     ...     _ = f.write("ODOM 1 2 3\\n")
     >>> with open_text(p) as f:

@@ -107,9 +107,7 @@ def read_carmen_log(
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "tiny.log"
-    >>> _ = p.write_text('''# message formats defined: PARAM ODOM FLASER
+    >>> p = tmp_text("tiny.log", '''# message formats defined: PARAM ODOM FLASER
     ... PARAM robot_front_laser_max 81.9 nohost 0
     ... ODOM 0 0 0 0 0 0 0.0 host 0.0
     ... FLASER 4 1 2 3 81.9 0 0 0 0 0 0 0.1 host 0.1
@@ -392,10 +390,9 @@ def write_carmen_log(path: PathLike, log: LaserLog, host: str = "localize") -> P
 
     Examples
     --------
-    >>> import tempfile, pathlib
     >>> log = LaserLog(times=[0.0, 0.2], odometry=[[0, 0, 0], [0.3, 0.1, 0.2]], ranges=np.ones((2, 180)),
     ...                angles=carmen_angles(180), max_range=81.83)
-    >>> p = write_carmen_log(pathlib.Path(tempfile.mkdtemp()) / "r.log.gz", log)
+    >>> p = write_carmen_log(tmp_dir() / "r.log.gz", log)
     >>> back = read_carmen_log(p)
     >>> bool(np.allclose(back.odometry, log.odometry)), back.max_range
     (True, 81.83)

@@ -100,9 +100,7 @@ def read_cmu_map(path: PathLike) -> OccupancyGrid:
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "tiny.dat"
-    >>> _ = p.write_text('''robot_specifications->global_mapsize_x  30
+    >>> p = tmp_text("tiny.dat", '''robot_specifications->global_mapsize_x  30
     ... robot_specifications->global_mapsize_y  20
     ... robot_specifications->resolution 10
     ...
@@ -207,9 +205,8 @@ def write_cmu_map(path: PathLike, grid: OccupancyGrid, decimals: int = 6) -> Pat
 
     Examples
     --------
-    >>> import tempfile, pathlib
     >>> g = OccupancyGrid(np.array([[0.0, 1.0, np.nan]]), 0.1)
-    >>> p = write_cmu_map(pathlib.Path(tempfile.mkdtemp()) / "m.dat", g)
+    >>> p = write_cmu_map(tmp_dir() / "m.dat", g)
     >>> print(p.read_text())    # doctest: +NORMALIZE_WHITESPACE
     robot_specifications->global_mapsize_x  30
     robot_specifications->global_mapsize_y  10
@@ -280,10 +277,8 @@ def read_cmu_log(
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "robot.log"
     >>> scan = " ".join(["150"] * 179 + ["8183"])
-    >>> _ = p.write_text(f"O 100 200 0.5 0.01\\nL 100 200 0 125 200 0 {scan} 0.02\\n")
+    >>> p = tmp_text("robot.log", f"O 100 200 0.5 0.01\\nL 100 200 0 125 200 0 {scan} 0.02\\n")
     >>> log = read_cmu_log(p)
     >>> log
     LaserLog('cmu', scans=1, beams=180 [-90.0..89.0 deg], duration=0.0 s, max_range=80 m, reference poses=no)
@@ -379,10 +374,9 @@ def write_cmu_log(path: PathLike, log: LaserLog, decimals: int = 3, angle_decima
 
     Examples
     --------
-    >>> import tempfile, pathlib
     >>> log = LaserLog(times=[0.0, 0.1], odometry=[[1, 2, 0.1], [1.1, 2, 0.1]], ranges=np.full((2, 180), 3.0),
     ...                angles=CMU_ANGLES, max_range=80.0, sensor_offset=CMU_SENSOR_OFFSET)
-    >>> p = write_cmu_log(pathlib.Path(tempfile.mkdtemp()) / "r.log", log)
+    >>> p = write_cmu_log(tmp_dir() / "r.log", log)
     >>> back = read_cmu_log(p)
     >>> bool(np.allclose(back.odometry, log.odometry)), back.sensor_offset.round(3).tolist()
     (True, [0.25, 0.0, 0.0])

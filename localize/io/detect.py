@@ -52,9 +52,7 @@ def detect_map_format(path: PathLike) -> str:
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "map.txt"
-    >>> _ = p.write_text("image: a.pgm\\nresolution: 0.05\\norigin: [0, 0, 0]\\n")
+    >>> p = tmp_text("map.txt", "image: a.pgm\\nresolution: 0.05\\norigin: [0, 0, 0]\\n")
     >>> detect_map_format(p)
     'ros'
     """
@@ -89,9 +87,7 @@ def detect_log_format(path: PathLike) -> str:
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "robot.log"
-    >>> _ = p.write_text("# a comment\\nPARAM robot_use_laser on\\nODOM 0 0 0 0 0 0 0 h 0\\n")
+    >>> p = tmp_text("robot.log", "# a comment\\nPARAM robot_use_laser on\\nODOM 0 0 0 0 0 0 0 h 0\\n")
     >>> detect_log_format(p)
     'carmen'
     """

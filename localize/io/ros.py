@@ -66,8 +66,7 @@ def read_pgm(path: PathLike) -> NDArray:
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.pgm"
+    >>> p = tmp_dir() / "a.pgm"
     >>> _ = p.write_bytes(b"P5\\n# made by hand\\n3 2\\n255\\n" + bytes([0, 128, 255, 254, 205, 1]))
     >>> read_pgm(p)
     array([[  0, 128, 255],
@@ -138,9 +137,8 @@ def write_pgm(path: PathLike, image: NDArray) -> Path:
 
     Examples
     --------
-    >>> import tempfile, pathlib
     >>> img = np.array([[0, 254], [205, 100]], dtype=np.uint8)
-    >>> p = write_pgm(pathlib.Path(tempfile.mkdtemp()) / "m.pgm", img)
+    >>> p = write_pgm(tmp_dir() / "m.pgm", img)
     >>> np.array_equal(read_pgm(p), img)
     True
     """
@@ -178,9 +176,7 @@ def parse_map_yaml(path: PathLike) -> dict:
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "m.yaml"
-    >>> _ = p.write_text("image: m.pgm  # the picture\\nresolution: 0.05\\norigin: [-1.0, 2, 0.0]\\n")
+    >>> p = tmp_text("m.yaml", "image: m.pgm  # the picture\\nresolution: 0.05\\norigin: [-1.0, 2, 0.0]\\n")
     >>> d = parse_map_yaml(p)
     >>> d["image"], d["resolution"], d["origin"]
     (('m.pgm', 1), (0.05, 2), ([-1.0, 2, 0.0], 3))
@@ -312,8 +308,7 @@ def read_ros_map(
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> d = tmp_dir()
     >>> _ = write_pgm(d / "m.pgm", np.array([[0, 0, 0], [254, 205, 150]], dtype=np.uint8))
     >>> _ = (d / "m.yaml").write_text("image: m.pgm\\nresolution: 0.5\\norigin: [-1.0, 2.0, 0.0]\\n"
     ...                               "negate: 0\\noccupied_thresh: 0.65\\nfree_thresh: 0.196\\n")
@@ -418,9 +413,8 @@ def write_ros_map(
 
     Examples
     --------
-    >>> import tempfile, pathlib
     >>> g = OccupancyGrid(np.array([[0.0, 1.0], [np.nan, 0.05]]), 0.1, origin=(2.0, -1.0))
-    >>> p = write_ros_map(pathlib.Path(tempfile.mkdtemp()) / "out.yaml", g)
+    >>> p = write_ros_map(tmp_dir() / "out.yaml", g)
     >>> back = read_ros_map(p)
     >>> np.array_equal(back.data, g.data.round(), equal_nan=True), back.origin.tolist()
     (True, [2.0, -1.0])

@@ -151,8 +151,7 @@ def is_rosbag(path: PathLike) -> bool:
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> d = tmp_dir()
     >>> is_rosbag(d), (d / "metadata.yaml").write_text("rosbag2_bagfile_information: {}") > 0, is_rosbag(d)
     (False, True, True)
     """
@@ -292,11 +291,10 @@ def read_rosbag(
 
     Examples
     --------
-    >>> import tempfile, pathlib
     >>> log = LaserLog(times=[1.0, 1.5, 2.0], odometry=[[0, 0, 0], [0.1, 0, 0.05], [0.2, 0, 0.1]],
     ...                ranges=np.full((3, 4), 2.5), angles=np.radians([-90.0, -30, 30, 90]), max_range=8.0,
     ...                sensor_offset=(0.2, 0.0, 0.0))
-    >>> bag = write_rosbag_log(pathlib.Path(tempfile.mkdtemp()) / "robot.bag", log)
+    >>> bag = write_rosbag_log(tmp_dir() / "robot.bag", log)
     >>> back = read_rosbag(bag)
     >>> back.format, len(back), back.sensor_offset.round(6).tolist(), np.degrees(back.angles).round(3).tolist()
     ('rosbag1', 3, [0.2, 0.0, 0.0], [-90.0, -30.0, 30.0, 90.0])
@@ -711,8 +709,7 @@ def write_result_bag(
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = write_result_bag(pathlib.Path(tempfile.mkdtemp()) / "out.bag", [1.0, 2.0], [[0, 0, 0], [1, 0, 0.5]],
+    >>> p = write_result_bag(tmp_dir() / "out.bag", [1.0, 2.0], [[0, 0, 0], [1, 0, 0.5]],
     ...                      particles={1: np.zeros((5, 3))})
     >>> sorted(bag_topics(p).items())                          # doctest: +NORMALIZE_WHITESPACE
     [('/amcl_pose', 'geometry_msgs/msg/PoseWithCovarianceStamped'),

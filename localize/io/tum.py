@@ -38,8 +38,7 @@ def write_tum(path: PathLike, times: ArrayLike, poses: ArrayLike, comment: str |
 
     Examples
     --------
-    >>> import tempfile, pathlib
-    >>> p = write_tum(pathlib.Path(tempfile.mkdtemp()) / "t.tum", [1.5], [[2.0, 3.0, np.pi / 2]])
+    >>> p = write_tum(tmp_dir() / "t.tum", [1.5], [[2.0, 3.0, np.pi / 2]])
     >>> print(p.read_text().strip())
     1.500000000 2.000000 3.000000 0.000000 0.000000000 0.000000000 0.707106781 0.707106781
     >>> t, q = read_tum(p)
