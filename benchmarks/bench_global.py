@@ -121,11 +121,29 @@ def load(name: str, root: Path | None = None):
 def willow_log(world: OccupancyGrid, n_scans: int, rng: np.random.Generator):
     """A simulated robot in the Willow map: 181 beams over 180 degrees, 30 m range, unmapped clutter.
 
-    It drives 0.5 m between scans, like the robots of the CARMEN logs (0.3-1 m).
+    It drives 0.5 m between scans, like the robots of the CARMEN logs (0.3-1 m),
+    and when its way is blocked it turns towards the more open side until it
+    can drive on (``when_blocked="open_side"``), instead of dithering left and
+    right on the spot for tens of scans.
+
+    The simulated laser sees *through* the map's unknown cells. Much of the
+    Willow map's free space ends in unknown without a wall (fans of free
+    cells swept by the mapping robot's beams through doors); a real beam
+    there goes on into the room beyond. A laser that stopped at the edge of
+    the unknown would report walls that no map shows, on which no filter that
+    treats unknown as "the map does not know" (the CLI, ROS AMCL) can agree:
+    measured, an exact scan at the true pose then scored up to 9 nats worse
+    than the same scan turned by 5 degrees.
     """
+    from localize.sensors import BeamModel
+
     angles = np.radians(np.linspace(-90, 90, 181))
-    run = sim.range_run(world, rng, n_steps=n_scans, angles=angles, max_range=30.0, speed=0.5, dt=1.0,
-                        n_clutter=10)
+    cluttered, _ = sim.add_clutter(world, 10, rng)
+    see_through = OccupancyGrid(cluttered.data, cluttered.resolution, origin=cluttered.origin,
+                                unknown_is_obstacle=False)
+    laser = BeamModel(see_through, 30.0, method="exact", **sim.DEFAULT_SCAN_NOISE)
+    run = sim.range_run(cluttered, rng, n_steps=n_scans, angles=angles, max_range=30.0, speed=0.5, dt=1.0,
+                        n_clutter=0, sensor=laser, when_blocked="open_side")
     return io.LaserLog(times=run.times, odometry=run.odometry, ranges=run.ranges, angles=run.angles,
                        max_range=run.max_range, poses=run.poses, source="willow-sim", format="sim")
 

@@ -440,7 +440,7 @@ def _segment_clear(world: OccupancyGrid, a: NDArray, b: NDArray, radius: float) 
 
 def wander_path(world: OccupancyGrid, n_steps: int, rng: np.random.Generator, start: ArrayLike | None = None,
                 speed: float = 0.3, dt: float = 1.0, radius: float = 0.25, waypoints: ArrayLike | None = None,
-                max_turn: float = 0.6) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+                max_turn: float = 0.6, when_blocked: str = "random") -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """A collision-free trajectory: a wander controller, or a route through waypoints.
 
     Every step the robot turns by at most ``max_turn`` and then drives
@@ -471,6 +471,12 @@ def wander_path(world: OccupancyGrid, n_steps: int, rng: np.random.Generator, st
         ``speed * dt``), then stop. They must be reachable in straight lines.
     max_turn : float
         Largest turn per step (radians).
+    when_blocked : "random" or "open_side"
+        How a blocked robot turns on the spot: ``"random"`` (default) by
+        ``max_turn`` to the left or right at random at every blocked step, so
+        that it may dither in place for many steps; ``"open_side"`` towards
+        the side whose probe rays reach farther, and on the same way until a
+        step can be driven again (as a robot that backs out of a corner).
 
     Returns
     -------
@@ -490,6 +496,8 @@ def wander_path(world: OccupancyGrid, n_steps: int, rng: np.random.Generator, st
     rng = check_rng(rng)
     n_steps = check_count(n_steps, "n_steps")
     speed, dt, radius, max_turn = float(speed), float(dt), float(radius), float(max_turn)
+    if when_blocked not in ("random", "open_side"):
+        raise ValueError(f"when_blocked must be 'random' or 'open_side'; got {when_blocked!r}")
     if not (speed >= 0 and dt > 0 and radius > 0 and max_turn > 0):
         raise ValueError(
             f"need speed >= 0, dt > 0, radius > 0 and max_turn > 0; got speed={speed}, dt={dt}, "
@@ -508,6 +516,7 @@ def wander_path(world: OccupancyGrid, n_steps: int, rng: np.random.Generator, st
             raise ValueError(f"start {pose[:2].round(3).tolist()} is within radius {radius} m of an obstacle")
     wps = None if waypoints is None else np.asarray(waypoints, dtype=float).reshape(-1, 2)
     wp_i = 0
+    escape = 0.0                      # "open_side": the way a blocked robot turns (+1 left, -1 right)
     poses = np.zeros((n_steps, 3))
     planned = np.zeros((n_steps, 3))
     poses[0] = pose
@@ -538,8 +547,15 @@ def wander_path(world: OccupancyGrid, n_steps: int, rng: np.random.Generator, st
                     f"the route to waypoint {wp_i} {wps[wp_i].round(3).tolist()} passes within {radius} m of an "
                     f"obstacle near ({new[0]:.2f}, {new[1]:.2f})"
                 )
-            # blocked: turn on the spot, by a random amount away from the current heading
-            new = np.array([pose[0], pose[1], wrap_angle(pose[2] + rng.choice([-1.0, 1.0]) * max_turn)])
+            # blocked: turn on the spot, away from the current heading
+            if when_blocked == "random":
+                escape = rng.choice([-1.0, 1.0])
+            elif escape == 0.0:                      # towards the more open side, and keep that way
+                r = probe.cast(pose, probe_angles)[0]
+                escape = 1.0 if r[4:].max() + 0.01 * rng.random() >= r[:3].max() + 0.01 * rng.random() else -1.0
+            new = np.array([pose[0], pose[1], wrap_angle(pose[2] + escape * max_turn)])
+        else:
+            escape = 0.0
         planned[k] = relative(pose, new)
         poses[k] = new
         pose = new
@@ -596,6 +612,7 @@ def range_run(
     scan_noise: dict | None = None,
     sensor: Any = "beam",
     odom_origin: ArrayLike | None = None,
+    when_blocked: str = "random",
 ) -> RangeRun:
     """Simulate a robot with a laser range finder driving through a map.
 
@@ -641,6 +658,8 @@ def range_run(
         offset).
     odom_origin : array_like, shape (3,), optional
         First odometry reading (default: random, see :func:`odometry_readings`).
+    when_blocked : "random" or "open_side"
+        How the wandering robot turns when its way is blocked (see :func:`wander_path`).
 
     Returns
     -------
@@ -692,7 +711,7 @@ def range_run(
             leg_start = _free_pose(world, rng, 2 * radius)
             planned[a] = [speed * dt, 0.0, 0.0]
         p, pl = wander_path(world, b - a, rng, start=leg_start, speed=speed, dt=dt, radius=radius,
-                            waypoints=waypoints)
+                            waypoints=waypoints, when_blocked=when_blocked)
         poses[a:b] = p
         planned[a + 1:b] = pl[1:]
 

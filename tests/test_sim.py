@@ -302,3 +302,34 @@ def test_corridor_helpers():
         sim.corridor_run(np.random.default_rng(0), doors=[0, 2, 1])
     with pytest.raises(ValueError, match="p_hit"):
         sim.corridor_run(np.random.default_rng(0), p_hit=1.0)
+
+
+def _blocked_turn_runs(poses):
+    """Signs of the on-the-spot turns, split into runs of consecutive blocked steps."""
+    step = relative(poses[:-1], poses[1:])
+    blocked = np.hypot(step[:, 0], step[:, 1]) < 1e-12
+    runs, cur = [], []
+    for b, dth in zip(blocked, step[:, 2]):
+        if b:
+            cur.append(np.sign(dth))
+        elif cur:
+            runs.append(cur)
+            cur = []
+    return runs + ([cur] if cur else [])
+
+
+def test_open_side_blocked_robot_keeps_turning_one_way_and_stays_clear(office):
+    rng = np.random.default_rng(3)
+    poses, _ = sim.wander_path(office, 400, rng, when_blocked="open_side")
+    runs = _blocked_turn_runs(poses)
+    assert sum(len(r) > 1 for r in runs) >= 3          # the office blocks the robot often enough to test
+    assert all(len(set(r)) == 1 for r in runs)          # never left-right-left on the spot
+    assert np.all(office.distance_at(poses[:, :2]) >= 0.25)
+    # the default dithers: some blocked run turns both ways (the behaviour the option exists to avoid)
+    rand, _ = sim.wander_path(office, 400, np.random.default_rng(3))
+    assert any(len(set(r)) == 2 for r in _blocked_turn_runs(rand))
+
+
+def test_when_blocked_is_checked(office):
+    with pytest.raises(ValueError, match="when_blocked must be 'random' or 'open_side'"):
+        sim.wander_path(office, 5, np.random.default_rng(0), when_blocked="left")
