@@ -559,7 +559,7 @@ for name, situation, use in verdicts:
 #
 # This notebook keeps its experiment small: 20 seeds of 30–40 steps and 1000
 # particles, just enough for the claims checked above (each with a tolerance
-# derived from the 20 seeds), and about 12 s on one core. Twenty seeds are not
+# derived from the 20 seeds), and under 10 s on one core. Twenty seeds are not
 # enough for finer distinctions: for publication-grade numbers raise `N_SEEDS`
 # to 500, pass `n_steps=200` and `n_particles=5000` through
 # `C.scenario(name, ...)`, and expect the run to take a few hundred times
