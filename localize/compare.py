@@ -71,6 +71,8 @@ __all__ = [
     "simulate",
     "run_filters",
     "monte_carlo",
+    "start_monte_carlo",
+    "Experiment",
     "summary_rows",
     "format_table",
     "rate_tolerance",
@@ -675,6 +677,134 @@ def _run_seed(args: tuple) -> Run:
     return run_filters(sc, seed, filters, sensor_factory=sensor_factory)
 
 
+class _Later:
+    """A job run in the calling process when its result is asked for (the serial path), like a Future."""
+
+    def __init__(self, args: tuple) -> None:
+        self.args, self._run = args, None
+
+    def result(self) -> Run:
+        if self._run is None:
+            self._run = _run_seed(self.args)
+        return self._run
+
+    def done(self) -> bool:
+        return self._run is not None
+
+
+class Experiment:
+    """Monte Carlo runs of several scenarios, under way in worker processes (see :func:`start_monte_carlo`).
+
+    :meth:`result` waits for the runs that are still going and returns the
+    :class:`MonteCarlo` of every scenario, under the keys it was started with.
+    """
+
+    def __init__(self, scenarios: dict, seeds: list, filters: tuple, jobs: dict) -> None:
+        self.scenarios, self.seeds, self.filters = scenarios, seeds, filters
+        self._jobs = jobs            # key -> list of futures, one per seed, in seed order
+        self._result: dict | None = None
+
+    def __repr__(self) -> str:
+        return (f"Experiment({len(self.scenarios)} scenarios x {len(self.seeds)} seeds, "
+                f"{self.n_done()} of {self.n_runs} runs done)")
+
+    @property
+    def n_runs(self) -> int:
+        """Number of runs (scenarios times seeds)."""
+        return len(self.scenarios) * len(self.seeds)
+
+    def n_done(self) -> int:
+        """How many runs have finished so far."""
+        return sum(f.done() for fs in self._jobs.values() for f in fs)
+
+    def result(self, progress: bool = False) -> dict:
+        """Wait for every run; ``{key: MonteCarlo}`` in the order the scenarios were given.
+
+        ``progress=True`` shows a tqdm bar over the runs
+        (:func:`localize.metrics.progress`; in a notebook, in a cell tagged
+        ``nbval-ignore-output`` and ``remove-output``). Calling it again returns
+        the same results.
+        """
+        if self._result is None:
+            futures = [f for fs in self._jobs.values() for f in fs]
+            bar = _metrics_mod.progress(futures, progress, desc=f"{self.n_runs} runs", total=len(futures))
+            runs = iter([f.result() for f in bar])
+            out = {}
+            for key, sc in self.scenarios.items():
+                got = [next(runs) for _ in self.seeds]
+                out[key] = MonteCarlo(sc, list(self.seeds), {n: _metrics(got, n) for n in self.filters})
+            self._result = out
+        return self._result
+
+
+def start_monte_carlo(scenarios, seeds, filters=FILTERS, sensor_factory=None,
+                      processes: int | None = None) -> Experiment:
+    """Start the Monte Carlo runs of several scenarios in worker processes and return at once.
+
+    The runs go on in the background while the caller does other things (in
+    a notebook: while the next cells draw figures); ``.result()`` of the
+    returned :class:`Experiment` waits for them and gives the
+    :class:`MonteCarlo` of each scenario, the same as :func:`monte_carlo`
+    would have (for any number of processes).
+
+    Parameters
+    ----------
+    scenarios : dict key -> Scenario, or sequence of Scenario
+        A sequence is keyed by the scenarios' names.
+    seeds : iterable of int
+    filters : sequence of names
+    sensor_factory : callable, optional
+        See :func:`run_filters`; must be picklable (a module-level function or class).
+    processes : int or None
+        Worker processes (``None``, the default: one per CPU). With 1 there
+        are no workers: ``.result()`` computes the runs, in the calling process.
+
+    Returns
+    -------
+    Experiment
+
+    Examples
+    --------
+    >>> ex = start_monte_carlo([scenario("tracking", n_steps=10)], range(2), filters=("EKF",), processes=1)
+    >>> ex
+    Experiment(1 scenarios x 2 seeds, 0 of 2 runs done)
+    >>> mc = ex.result()["tracking"]
+    >>> bool(np.array_equal(mc.metrics["EKF"].pos_err,
+    ...                     monte_carlo(scenario("tracking", n_steps=10), range(2), filters=("EKF",)).metrics["EKF"].pos_err))
+    True
+    """
+    if isinstance(scenarios, Scenario):
+        raise TypeError("scenarios must be a dict or a sequence of Scenario; for one scenario use monte_carlo")
+    if not hasattr(scenarios, "items"):
+        scenarios = list(scenarios)
+        names = [getattr(sc, "name", None) for sc in scenarios]
+        if len(set(names)) != len(names):
+            raise ValueError(f"scenario names repeat ({names}): pass a dict with one key per scenario")
+        scenarios = dict(zip(names, scenarios))
+    scenarios = dict(scenarios)
+    if not scenarios:
+        raise ValueError("scenarios must hold at least one Scenario")
+    for key, sc in scenarios.items():
+        if not isinstance(sc, Scenario):
+            raise TypeError(f"scenarios[{key!r}] must be a Scenario (see localize.compare.scenario); "
+                            f"got {type(sc).__name__}")
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("seeds must name at least one seed")
+    filters = tuple(filters)
+    bad = [f for f in filters if f not in FILTERS]
+    if bad or not filters:
+        raise ValueError(f"filters must be a non-empty subset of {FILTERS}; got {filters}")
+    n_proc = (os.cpu_count() or 1) if processes is None else check_count(processes, "processes")
+    n_jobs = len(scenarios) * len(seeds)
+    pool = _pool(n_proc) if n_proc > 1 and n_jobs > 1 else None
+    jobs = {}
+    for key, sc in scenarios.items():
+        args = [(sc, s, filters, sensor_factory) for s in seeds]
+        jobs[key] = [pool.submit(_run_seed, a) for a in args] if pool is not None else [_Later(a) for a in args]
+    return Experiment(scenarios, seeds, filters, jobs)
+
+
 def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None, progress: bool = False,
                 processes: int | None = 1) -> MonteCarlo:
     """Run all ``filters`` on ``sc`` for every seed and collect the metrics.
@@ -696,7 +826,8 @@ def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None, progr
         1, no workers). Every seed is its own independent run, so the result
         is the same for any number of processes (only the measured seconds
         differ); ``sensor_factory`` must then be picklable (a module-level
-        function or class).
+        function or class). To run several scenarios at once, or in the
+        background, use :func:`start_monte_carlo`.
 
     Returns
     -------
@@ -710,17 +841,13 @@ def monte_carlo(sc: Scenario, seeds, filters=FILTERS, sensor_factory=None, progr
     >>> bool(np.array_equal(one.metrics["EKF"].pos_err, two.metrics["EKF"].pos_err))
     True
     """
-    seeds = [int(s) for s in seeds]
-    if not seeds:
-        raise ValueError("seeds must name at least one seed")
-    n_proc = (os.cpu_count() or 1) if processes is None else check_count(processes, "processes")
-    jobs = [(sc, s, tuple(filters), sensor_factory) for s in seeds]
-    if n_proc > 1 and len(seeds) > 1:
-        results = _pool(n_proc).map(_run_seed, jobs)
-    else:
-        results = map(_run_seed, jobs)
-    runs = list(_metrics_mod.progress(results, progress, desc=f"scenario {sc.name}", total=len(seeds)))
-    return MonteCarlo(sc, seeds, {n: _metrics(runs, n) for n in filters})
+    if not isinstance(sc, Scenario):
+        raise TypeError(f"sc must be a Scenario (see localize.compare.scenario); got {type(sc).__name__}")
+    ex = start_monte_carlo({sc.name: sc}, seeds, filters, sensor_factory, processes=processes)
+    futures = ex._jobs[sc.name]
+    runs = [f.result() for f in _metrics_mod.progress(futures, progress, desc=f"scenario {sc.name}",
+                                                       total=len(futures))]
+    return MonteCarlo(sc, ex.seeds, {n: _metrics(runs, n) for n in ex.filters})
 
 
 # ----------------------------------------------------------------------------

@@ -253,3 +253,42 @@ def test_monte_carlo_in_worker_processes_gives_the_same_runs():
 def test_monte_carlo_checks_processes():
     with pytest.raises(ValueError, match="processes"):
         C.monte_carlo(C.scenario("tracking", n_steps=10), range(2), processes=0)
+
+
+def test_start_monte_carlo_gives_what_monte_carlo_gives_for_any_number_of_processes():
+    # the experiment runs in the background; its results must be those of monte_carlo, scenario by scenario,
+    # and the same with workers as without (a pool that mixed up the scenarios' jobs would fail here)
+    scs = {"a": C.scenario("global", n_steps=12, n_particles=200), "b": C.scenario("tracking", n_steps=10,
+                                                                                    n_particles=100)}
+    serial = C.start_monte_carlo(scs, [2, 0], processes=1)
+    assert serial.n_done() == 0 and serial.n_runs == 4
+    pooled = C.start_monte_carlo(scs, [2, 0], processes=2)
+    got_serial, got_pooled = serial.result(), pooled.result()
+    assert list(got_pooled) == ["a", "b"] and pooled.n_done() == 4
+    assert pooled.result() is got_pooled   # asked again: the same results
+    for key, sc in scs.items():
+        ref = C.monte_carlo(sc, [2, 0])
+        for mc in (got_serial[key], got_pooled[key]):
+            assert mc.scenario is sc and mc.seeds == [2, 0]
+            for name in C.FILTERS:
+                for attr in ("pos_err", "head_err", "nees", "failed"):
+                    np.testing.assert_array_equal(getattr(mc.metrics[name], attr), getattr(ref.metrics[name], attr),
+                                                  err_msg=f"{key} {name}.{attr}")
+
+
+def test_start_monte_carlo_keys_and_checks():
+    sc = C.scenario("tracking", n_steps=10, n_particles=100)
+    ex = C.start_monte_carlo([sc], range(2), filters=("EKF",), processes=1)
+    assert list(ex.result()) == ["tracking"] and list(ex.result()["tracking"].metrics) == ["EKF"]
+    with pytest.raises(ValueError, match="names repeat"):
+        C.start_monte_carlo([sc, sc], range(2), processes=1)
+    with pytest.raises(TypeError, match="for one scenario use monte_carlo"):
+        C.start_monte_carlo(sc, range(2), processes=1)
+    with pytest.raises(TypeError, match=r"scenarios\['x'\] must be a Scenario"):
+        C.start_monte_carlo({"x": "tracking"}, range(2), processes=1)
+    with pytest.raises(ValueError, match="seeds"):
+        C.start_monte_carlo([sc], [], processes=1)
+    with pytest.raises(ValueError, match="filters"):
+        C.start_monte_carlo([sc], range(2), filters=("PF",), processes=1)
+    with pytest.raises(ValueError, match="processes"):
+        C.start_monte_carlo([sc], range(2), processes=0)

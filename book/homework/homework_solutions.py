@@ -33,10 +33,11 @@
 
 # %%
 import math
+from pathlib import Path
 
 import numpy as np
 
-from localize import check
+from localize import check, io
 from localize.geometry import wrap_angle
 
 # %% [markdown]
@@ -390,3 +391,130 @@ def ekf_update(mean, cov, z, landmark, Q):
 
 # %%
 check.ekf_update(ekf_update)
+
+# %% [markdown]
+# ## 12. A hallway with walls at both ends (chapter 1)
+#
+# `predict_stop(belief, kernel, offset)`: the prediction step of chapter 1 in a
+# hallway of `n = len(belief)` cells that does **not** wrap around. The robot is
+# commanded `offset` cells (positive towards higher indices) and ends `d` cells
+# beyond the commanded cell with probability `kernel[c + d]`, where
+# `c = len(kernel) // 2`. A move that would end beyond either end of the
+# hallway ends in the end cell: the robot stops at the wall, so no belief is
+# lost. Return a new array and leave `belief` unchanged. Why is it wrong to
+# shift the whole belief first and blur it afterwards?
+
+# %% tags=["solution"]
+def predict_stop(belief, kernel, offset):
+    """Prediction in a bounded hallway: moves that would pass an end stop in the end cell."""
+    belief = np.asarray(belief, dtype=float)
+    n, c = len(belief), len(kernel) // 2
+    out = np.zeros(n)
+    for src in range(n):
+        for m, p in enumerate(kernel):   # shift and blur each source cell together, then clip
+            out[min(max(src + offset + m - c, 0), n - 1)] += belief[src] * p
+    return out
+
+
+# %%
+check.predict_stop(predict_stop)
+
+# %% [markdown]
+# ## 13. How many particles? The KLD stopping rule (chapter 8)
+#
+# `kld_count(samples, bin_size, epsilon, delta, n_min)`: `samples` is an
+# `(M, 3)` array of candidate particles, drawn one after another. Walk through
+# them as the loop of PR table 8.4 does (without its motion and sensor parts)
+# and return the first `n` for which $n \ge n(k)$ and $n \ge n_{min}$, where `k`
+# is the number of histogram bins of size `bin_size` that the first `n` samples
+# occupy and $n(k)$ is `kld_bound(k, epsilon, delta)`; return `M` when no `n`
+# qualifies. `bin_keys(samples, bin_size)` gives each sample's bin as one
+# integer.
+
+# %%
+from localize.kld import bin_keys, kld_bound
+
+# %% tags=["solution"]
+def kld_count(samples, bin_size, epsilon, delta, n_min):
+    """Number of samples KLD-sampling draws before its stopping rule is met."""
+    occupied = set()
+    for n, key in enumerate(bin_keys(samples, bin_size).tolist(), start=1):
+        occupied.add(key)   # this sample's bin counts before the test
+        if n >= n_min and n >= kld_bound(len(occupied), epsilon, delta):
+            return n
+    return len(samples)     # the rule is never met: every candidate is needed
+
+
+# %%
+check.kld_loop(kld_count)
+
+# %% [markdown]
+# ## 14. A file-format trap: the XY log (chapter 9)
+#
+# `read_xy_log(path)`: read a made-up log whose every line is
+# `SCAN t x y theta r1 ... rn`: time in seconds, the odometry pose (metres,
+# metres, radians), then the ranges in **millimetres**, beams from +90° **down**
+# to -90° (clockwise), `0` meaning "no return", from a scanner that reaches
+# 30 m. Return an `io.LaserLog` in the book's conventions: ranges in metres,
+# angles counter-clockwise from the robot's right (`-pi/2` ... `pi/2`), a
+# reading of `max_range = 30.0` where there was no return. A line with another
+# number of fields than the first scan raises
+# `io.FormatError(path, line_number, message)`, lines counted from 1 (blank
+# lines count).
+
+# %% tags=["solution"]
+def read_xy_log(path):
+    """The XY log at `path` as an io.LaserLog in metres, counter-clockwise beams, 30 m for no return."""
+    times, odometry, ranges = [], [], []
+    for number, line in enumerate(Path(path).read_text().splitlines(), start=1):
+        fields = line.split()
+        if not fields:
+            continue
+        if fields[0] != "SCAN":
+            raise io.FormatError(path, number, f"expected a SCAN record; got {fields[0]!r}")
+        if ranges and len(fields) != 5 + len(ranges[0]):
+            raise io.FormatError(path, number, f"expected {5 + len(ranges[0])} fields like the first scan; "
+                                               f"got {len(fields)}")
+        try:
+            values = np.array(fields[1:], dtype=float)
+        except ValueError:
+            raise io.FormatError(path, number, "every field after SCAN must be a number") from None
+        times.append(values[0])
+        odometry.append(values[1:4])
+        r = values[4:][::-1] / 1000.0               # clockwise -> counter-clockwise, mm -> m
+        ranges.append(np.where(r == 0, 30.0, r))    # 0 is no return, not an obstacle at the sensor
+    angles = np.linspace(-np.pi / 2, np.pi / 2, len(ranges[0]))
+    return io.LaserLog(times=times, odometry=odometry, ranges=ranges, angles=angles, max_range=30.0,
+                       source=str(path), format="xy")
+
+
+# %%
+check.xy_reader(read_xy_log)
+
+# %% [markdown]
+# ## 15. Innovation gating (chapter 10)
+#
+# `in_gate(mean, cov, z, landmark, Q)`: should the EKF use the range-bearing
+# sighting `z` of the landmark at `landmark`, given the pose belief
+# $\mathcal N(\mu, \Sigma)$ and the sensor noise `Q`? With $\hat z$ and $H$ at
+# the mean (`landmark_measurement`, `landmark_jacobian`), the innovation
+# $y = z - \hat z$ (bearing wrapped) and $S = H \Sigma H^\top + Q$, return True
+# (keep it) when $y^\top S^{-1} y \le 9.21$, the 99% point of $\chi^2$ with two
+# degrees of freedom. What does a gate protect the EKF against, and why does
+# it keep a kidnapped robot lost?
+
+# %%
+from localize.ekf import landmark_jacobian, landmark_measurement
+
+# %% tags=["solution"]
+def in_gate(mean, cov, z, landmark, Q):
+    """Is the sighting inside the 99% innovation gate (chi-square, 2 dof)?"""
+    H = landmark_jacobian(mean, landmark)
+    y = np.asarray(z, dtype=float) - landmark_measurement(mean, landmark)
+    y[1] = wrap_angle(y[1])
+    S = H @ cov @ H.T + Q
+    return bool(y @ np.linalg.solve(S, y) <= 9.21)
+
+
+# %%
+check.innovation_gate(in_gate)

@@ -53,6 +53,18 @@ np.set_printoptions(precision=4, suppress=True)
 print("localize", localize.__version__)
 
 # %% [markdown]
+# The measurements at the heart of this chapter, 20 seeds of six scenarios
+# with all three filters, take several seconds of computing on every CPU. We
+# start them now, in worker processes that run in the background (one per
+# CPU), and collect the results when the section "Six scenarios" needs them;
+# meanwhile we look at how the filters work. (`C.start_monte_carlo` returns at
+# once; `C.monte_carlo` is the same for one scenario, waiting for the end.)
+
+# %%
+N_SEEDS = 20
+experiment = C.start_monte_carlo([C.scenario(name) for name in C.SCENARIOS], range(N_SEEDS))
+
+# %% [markdown]
 # ## The setting: landmarks, a range-bearing sensor, the velocity model
 #
 # The world has point landmarks at known positions (poles, reflectors). At each
@@ -185,7 +197,36 @@ for name in C.FILTERS:
 # When the problem is this benign the three agree to the centimetre: the
 # posterior *is* nearly Gaussian, and the Gaussian filters describe it with six
 # numbers where MCL needs a thousand particles.
+
+# %% [markdown]
+# ## Try it: noise sliders
 #
+# How much noise does it take to break them? The widget runs the three filters
+# on a few seeds of the tracking scenario (two seeds in the widget, four in the
+# static figures below) with the noise you choose. By default the landmarks
+# **look alike**: the filters are not told which landmark they see and must
+# work it out, a difficulty the six scenarios below come back to. Raise the
+# heading noise and thin out the sightings: somewhere around ×30 and "every 6
+# steps" the EKF and the UKF start to pick the wrong landmarks and get lost,
+# while MCL keeps up. Turn everything down, or tick off "look alike": all three
+# agree, and the EKF is the cheapest (see "Cost" below).
+
+# %% tags=["nbval-ignore-output"]
+from localize.widgets.ekf import noise_figure, noise_widget  # noqa: E402
+
+noise_widget()
+
+# %% [markdown]
+# For the static book: the default settings, and heading noise ×30 with
+# sightings every 6 steps.
+
+# %%
+noise_figure()
+plt.show()
+noise_figure(heading_noise=30.0, sense_every=6)
+plt.show()
+
+# %% [markdown]
 # ## How we score a filter
 #
 # For each scenario we run **20 seeds** (each seed draws a new noisy run and new
@@ -214,7 +255,6 @@ for name in C.FILTERS:
 #   notebook, whose printed outputs must be identical on every run).
 
 # %%
-N_SEEDS = 20
 lo, hi = localize.metrics.nees_bounds(3, N_SEEDS)
 print(f"95% band of the {N_SEEDS}-seed average NEES: [{lo:.2f}, {hi:.2f}]")
 
@@ -254,9 +294,7 @@ print(f"95% band of the {N_SEEDS}-seed average NEES: [{lo:.2f}, {hi:.2f}]")
 # enter its running averages).
 
 # %% tags=["nbval-ignore-output", "remove-output"]
-mcs = {}
-for name in C.SCENARIOS:
-    mcs[name] = C.monte_carlo(C.scenario(name), range(N_SEEDS), progress=True, processes=None)  # all CPUs
+mcs = experiment.result(progress=True)  # waits for the runs still going (started at the top)
 
 # %% tags=["nbval-ignore-output"]
 rows = C.summary_rows(mcs.values())
@@ -517,42 +555,17 @@ for name, situation, use in verdicts:
 # Many real systems do both: MCL to find the robot, a Kalman filter to track it.
 
 # %% [markdown]
-# ## Try it: noise sliders
-#
-# The widget runs the three filters on four seeds of the tracking scenario with
-# the noise you choose. With look-alike landmarks (the default), raise the
-# heading noise and thin out the sightings: somewhere around ×30 and "every 6
-# steps" the EKF and the UKF start to pick the wrong landmarks and get lost,
-# while MCL keeps up. Turn everything down, or tick off "look alike": all three
-# agree, and the EKF is the cheapest.
-
-# %% tags=["nbval-ignore-output"]
-from localize.widgets.ekf import noise_figure, noise_widget  # noqa: E402
-
-noise_widget()
-
-# %% [markdown]
-# For the static book: the default settings, and heading noise ×30 with
-# sightings every 6 steps.
-
-# %%
-noise_figure()
-plt.show()
-noise_figure(heading_noise=30.0, sense_every=6)
-plt.show()
-
-# %% [markdown]
 # ## Scaling up
 #
 # This notebook keeps its experiment small: 20 seeds of 30–40 steps and 1000
 # particles, just enough for the claims checked above (each with a tolerance
-# derived from the 20 seeds), and about 12 s on one core. Twenty seeds are not
+# derived from the 20 seeds), and under 10 s on one core. Twenty seeds are not
 # enough for finer distinctions: for publication-grade numbers raise `N_SEEDS`
 # to 500, pass `n_steps=200` and `n_particles=5000` through
 # `C.scenario(name, ...)`, and expect the run to take a few hundred times
-# longer. The seeds are independent runs, so `monte_carlo(..., processes=None)`
-# (as above) shares them among one worker process per CPU; the table is the same
-# for any number of processes.
+# longer. The seeds are independent runs, so `start_monte_carlo` (as above) and
+# `monte_carlo(..., processes=None)` share them among one worker process per
+# CPU; the table is the same for any number of processes.
 #
 # ## Summary
 #
@@ -686,15 +699,14 @@ print(f"gated EKF lost after the kidnapping in {lost} of 10 seeds")
 
 # %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell", "nbval-ignore-output"]
 # Solution (click to show)
-rates = {}
+configs = {(n, infl): C.scenario("global", n_particles=n, mcl_inflation=infl, n_steps=20)
+           for n in (100, 300, 1000) for infl in (1.0, 2.0)}
+pending = C.start_monte_carlo(configs, range(10), filters=("MCL",))  # in the background, on every CPU
+mc = C.monte_carlo(C.scenario("global", known_ids=True), range(10), filters=("EKF",))  # meanwhile, here
+rates = {key: m.metrics["MCL"].failure_rate for key, m in pending.result().items()}
 for n in (100, 300, 1000):
-    for infl in (1.0, 2.0):
-        mc = C.monte_carlo(C.scenario("global", n_particles=n, mcl_inflation=infl, n_steps=20), range(10),
-                           filters=("MCL",), processes=None)
-        rates[n, infl] = mc.metrics["MCL"].failure_rate
     print(f"{n:5d} particles: MCL fails {100 * rates[n, 1.0]:.0f}% (exact model), "
           f"{100 * rates[n, 2.0]:.0f}% (inflated x2)")
-mc = C.monte_carlo(C.scenario("global", known_ids=True), range(10), filters=("EKF",))
 print(f"EKF with identified landmarks from a random guess: fails {100 * mc.metrics['EKF'].failure_rate:.0f}%")
 # ten seeds make each rate uncertain by up to 16 points: check only what ten seeds can show
 assert C.rates_differ(rates[100, 1.0], rates[1000, 2.0], 10)          # few particles, exact model: worst
