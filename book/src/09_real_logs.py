@@ -550,22 +550,25 @@ print(section.strip() or "benchmarks/RESULTS.md has no bench_global section yet"
 # %% [markdown]
 # The target of the issue that asked for this benchmark — 95% success on every
 # log — is reached on the Intel log only (97%); CSAIL reaches 92%, ACES 85% and
-# Freiburg 079 83% (six in ten before the unknown cells became neutral for
-# particles too). The real logs' failures are mostly short excursions beyond
-# 1 m of runs that end well: in the region the map leaves unknown the scans
-# carry less evidence, and Freiburg's robot backs up while its odometry says
-# forwards. The Willow map stays at about one run in eight, and not because
-# global localization fails there: started *at the true pose* (`--track`), most
-# simulated Willow runs are lost as well. The simulated robot's scans see
-# little beyond the nearest partition and its wander controller, blocked, turns
-# on the spot back and forth for dozens of scans, each turn with the
-# simulator's odometry error: a harder robot than any of the logged ones, and
-# this benchmark's weakest part. What the table does show is honesty: on the
-# real logs no run ended "localized" while more than 1 m off; their failures
-# end "lost" or "searching" and say so (on Willow two of sixty ended
-# "localized" more than 1 m off). The next cell checks these statements
-# against the table, so that a re-run of the benchmark cannot silently
-# contradict them.
+# Freiburg 079 83%. The real logs' failures are mostly short excursions beyond
+# 1 m in runs that end well, and they happen at the same scans for every seed:
+# in the square the degraded map leaves unknown, the scans carry less evidence
+# and the cloud drifts with the odometry; and on Freiburg, whose odometry
+# reports the robot's speed without its sign, the robot backs up for thirty
+# scans while its odometry says forwards. A few ACES runs start in a stretch
+# of that building that looks the same in several places and localize only
+# after the first 30% of the run. The simulated Willow runs succeed less than
+# half of the time. Willow is the largest of the five buildings, its
+# simulated robot turns on the spot wherever it is blocked, and unmapped
+# clutter stands in its way; started *at the true pose* (`--track`) on the
+# same degraded maps, some of those runs lose the robot as well, so tracking
+# falls short there, not only the global search.
+#
+# What the table does show is honesty: on the real logs no run ended
+# "localized" while more than 1 m off; their failures end "lost" or
+# "searching" and say so (on Willow one of sixty ended "localized" more than
+# 1 m off). The next cell checks these statements against the table, so that
+# a re-run of the benchmark cannot silently contradict them.
 
 # %% tags=["remove-cell"]
 if section:
@@ -580,7 +583,7 @@ if section:
     for log_name, rate in claims.items():
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
     assert [n for n, r in rows.items() if r["success"] >= 0.95] == ["intel"]
-    assert 0.08 <= rows["willow"]["success"] <= 0.17 and rows["willow"]["off"] == 2
+    assert 0.40 <= rows["willow"]["success"] < 0.50 and rows["willow"]["off"] == 1
     assert all(r["off"] == 0 for n, r in rows.items() if n != "willow")
 
 # %% [markdown]
@@ -917,16 +920,18 @@ ax.legend(title="passes localized", ncol=5, loc="upper center", fontsize=8)
 plt.show()
 
 # %% [markdown]
-# On the benchmark's real logs and degraded maps (`benchmarks/bench_smooth.py`:
-# the same runs as `bench_global`, 20 starts x 2 seeds per log, each judged by
-# bench_global's rule), smoothing turned 20 of the forward pass's 62 failures
-# into successes and one success into a failure: Intel from 88% to 98%,
-# Freiburg 079 from 60% to 85%, ACES from 90% to 100%, CSAIL unchanged at 95%.
-# It cannot help where both passes fail at the same place: on the Willow map's
-# simulated cubicle floor, where the filter itself rarely localizes, it went
-# from 12% to 15%. It is an offline tool: it needs the whole log and takes a
-# little more than twice the time of one pass. The table, from
-# `benchmarks/RESULTS.md`:
+# On the benchmark's logs and degraded maps (`benchmarks/bench_smooth.py`: the
+# same runs as `bench_global`, 20 starts x 2 seeds per data set, each
+# trajectory judged by bench_global's rule), smoothing turned 7 of the forward
+# pass's failures into successes and 4 successes into failures: 164 of 200
+# runs succeed instead of 161. Its clearer gain is that more of each log is
+# localized — 90% of the scans instead of 81% — because the backward pass
+# localizes the start that the forward pass spends searching. It cannot help
+# where both passes go wrong at the same place (the region a degraded map
+# leaves unknown, Freiburg's unsigned odometry, the simulated Willow runs). It
+# is an offline tool: it needs the whole log and takes two to three times the
+# time of one pass. The table, from `benchmarks/RESULTS.md` (the cell after it
+# checks these numbers against it):
 
 # %%
 results_md = Path("../benchmarks/RESULTS.md")
@@ -934,6 +939,18 @@ text = results_md.read_text() if results_md.exists() else ""
 section = text[text.find("## bench_smooth"):] if "## bench_smooth" in text else ""
 section = section[:section.find("\n## ", 3)] if "\n## " in section[3:] else section
 print(section.strip() or "benchmarks/RESULTS.md has no bench_smooth section yet")
+
+# %% tags=["remove-cell"]
+if section:
+    rows = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 10 and cells[1].isdigit():
+            rows[cells[0]] = cells
+    every = rows["all"]
+    assert every[2].startswith("161/200") and every[3].startswith("164/200"), every
+    assert (every[4], every[5]) == ("7", "4"), every
+    assert every[6] == "81% / 90%", every
 
 # %% [markdown]
 # ## Summary
