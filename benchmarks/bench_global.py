@@ -182,7 +182,8 @@ def prepare(job: dict):
     else:
         sub = log.select(slice(start, min(start + n_scans, len(log))))
     bad_map = grid if job.get("clean") else degrade_map(grid, map_rng)
-    kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-", *job.get("args", [])]))
+    kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-", *job.get("args", [])]),
+                        grid=bad_map)
     kw.update(opts)
     if isinstance(kw.get("kld"), list):
         from localize.kld import KLDSampling

@@ -103,7 +103,7 @@ examples:
 # ============================================================================ defaults
 #: The defaults of ``localize run`` (see its --help and chapter 9 for the reasons behind each).
 DEFAULTS: dict[str, Any] = {
-    "particles": 50000,
+    "particles": "auto",
     "sensor": "likelihood",
     "beams": 30,
     "max_range": 30.0,
@@ -122,6 +122,42 @@ DEFAULTS: dict[str, Any] = {
     "unknown_penalty": 0.0,
     "expand": (0.0, 0.0),
 }
+
+
+#: ``--particles auto``: one particle per KLD bin of the map's free space, within these bounds.
+AUTO_PARTICLES: tuple[int, int] = (20_000, 300_000)
+
+
+def auto_particles(grid: OccupancyGrid) -> int:
+    """The initial cloud of ``localize run --particles auto`` (the default) for a map.
+
+    One particle per 0.5 m x 0.5 m x 10 degree bin of the free space
+    (:func:`localize.kld.pose_bins`, KLD-sampling's bins), so that a uniform
+    cloud leaves few bins near the robot empty whatever the building's size;
+    at least 20,000 and at most 300,000 (:data:`AUTO_PARTICLES`). About
+    75,000 for a floor of 520 m^2 of free space, 115,000 for 800 m^2.
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> auto_particles(office())                 # the book's office: 204 m^2 of free space
+    29412
+    """
+    from .kld import pose_bins
+
+    lo, hi = AUTO_PARTICLES
+    return int(min(max(pose_bins(grid), lo), hi))
+
+
+def resolve_particles(n: int | str, grid: OccupancyGrid | None) -> int:
+    """``n`` particles, or :func:`auto_particles` of ``grid`` for ``"auto"``."""
+    if isinstance(n, str):
+        if n != "auto":
+            raise ValueError(f"n_particles must be a whole number >= 1 or 'auto'; got {n!r}")
+        if grid is None:
+            raise ValueError("n_particles='auto' sizes the cloud from the map: pass grid=... (or a number)")
+        return auto_particles(grid)
+    return check_count(n, "n_particles")
 
 
 # ============================================================================ progress
@@ -233,7 +269,7 @@ class RunResult:
 def localize_log(
     grid: OccupancyGrid,
     log,
-    n_particles: int = DEFAULTS["particles"],
+    n_particles: int | str = DEFAULTS["particles"],
     rng: np.random.Generator | None = None,
     sensor: str = DEFAULTS["sensor"],
     alphas: Sequence[float] = DEFAULTS["alphas"],
@@ -266,9 +302,9 @@ def localize_log(
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
     The keyword defaults are those of ``localize run`` (:data:`DEFAULTS`):
-    50,000 particles shrunk by KLD-sampling, ``sigma_hit`` 0.2 m, tempering
-    0.3, a 5 cm minimum range, particles allowed in unknown cells, restarts
-    and expansion resetting on.
+    an initial cloud sized to the map (:func:`auto_particles`) shrunk by
+    KLD-sampling, ``sigma_hit`` 0.2 m, tempering 0.3, a 5 cm minimum range,
+    particles allowed in unknown cells, restarts on (expansion resetting off).
 
     The filtering loop is :func:`localize.mcl.run_filter`, the one run driver
     (update gating, estimates, the searching / localized / lost state); this
@@ -280,8 +316,9 @@ def localize_log(
         The map.
     log : LaserLog
         Scans and odometry (the controls are consecutive odometry poses).
-    n_particles : int
-        Number of particles (with ``kld``: the initial number).
+    n_particles : int or "auto"
+        Number of particles (with ``kld``: the initial number); ``"auto"``
+        sizes it to the map's free space (:func:`auto_particles`).
     rng : numpy.random.Generator
         The only source of randomness (required).
     sensor : {"likelihood", "beam"}
@@ -363,6 +400,7 @@ def localize_log(
     from .mcl import MCL, RobustOdometry, run_filter
 
     check_rng(rng)
+    n_particles = resolve_particles(n_particles, grid)
     if init not in ("global", "reference"):
         raise ValueError(f"init must be 'global' or 'reference'; got {init!r}")
     if beams is not None and beams < log.n_beams:
@@ -626,6 +664,16 @@ def _number_type(cast: type, expect: str, ok: Any, name: str) -> Any:
 
 
 _positive_int = _number_type(int, "a whole number >= 1", lambda v: v >= 1, "positive_int")
+
+
+def _particles(s: str) -> int | str:
+    """``--particles``: a whole number >= 1, or ``auto``."""
+    if s.strip().lower() == "auto":
+        return "auto"
+    try:
+        return _positive_int(s)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1 or 'auto'; got {s}") from None
 _positive_float = _number_type(float, "a positive number", lambda v: v > 0, "positive_float")
 _nonneg_float = _number_type(float, "a number >= 0", lambda v: v >= 0, "nonneg_float")
 _seed = _number_type(int, "a whole number >= 0 (a random generator's seed)", lambda v: v >= 0, "seed")
@@ -675,12 +723,14 @@ class FilterOption:
 #: The filter options of ``localize run`` whose defaults are :data:`DEFAULTS` (the parser is built from
 #: this table, and ``summary.json``'s settings list them).
 FILTER_OPTIONS: tuple[FilterOption, ...] = (
-    FilterOption("--particles", _positive_int, metavar="N", help="""
-        number of particles at the start (default {default}). With --kld (on by default) this is the initial
-        and largest number: a dense uniform cloud, because in a building of 500-1000 m^2 fewer particles
-        leave most 0.5 m x 0.5 m x 10 degree cells of the pose space empty, and the filter then needs luck
-        to have a particle near the robot. KLD-sampling shrinks the cloud to a few thousand once the filter
-        agrees. Example: --particles 100000"""),
+    FilterOption("--particles", _particles, metavar="N", help="""
+        number of particles at the start, or 'auto' (default {default}): one per 0.5 m x 0.5 m x 10 degree
+        cell of the pose space over the map's free space (KLD-sampling's cells), between 20,000 and 300,000
+        -- about 75,000 for 520 m^2 of free floor, 115,000 for 800 m^2. With --kld (on by default) this is
+        the initial and largest number: a dense uniform cloud, because with fewer particles most cells of
+        the pose space are empty, and the filter then needs luck to have a particle near the robot.
+        KLD-sampling shrinks the cloud to a few thousand once the filter agrees. Example: --particles
+        100000"""),
     FilterOption("--sensor", choices=("likelihood", "beam"), help="""
         sensor model: 'likelihood' field (fast, robust to small map errors) or the 'beam' model with ray
         casting (default {default}). Example: --sensor beam"""),
@@ -898,24 +948,29 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # ============================================================================ main
-def run_kwargs(args: argparse.Namespace) -> dict:
+def run_kwargs(args: argparse.Namespace, grid: OccupancyGrid | None = None) -> dict:
     """The keyword arguments of :func:`localize_log` that the ``run`` options stand for.
 
     The benchmarks call this with the parser's defaults, so that they measure
-    exactly what ``localize run`` does.
+    exactly what ``localize run`` does. ``--particles auto`` (the default)
+    needs the map, ``grid``, to size the initial cloud (:func:`auto_particles`).
 
     Examples
     --------
+    >>> from localize.maps import office
     >>> args = build_parser().parse_args(["run", "--log", "x.log", "--map", "m.yaml"])
-    >>> run_kwargs(args)["n_particles"] == args.particles
+    >>> args.particles
+    'auto'
+    >>> run_kwargs(args, grid=office())["n_particles"] == auto_particles(office())
     True
     """
     from .kld import KLDSampling
     from .mcl import Augmented
 
+    n_particles = resolve_particles(args.particles, grid)
     kld = None
     if args.kld > 0:
-        kld = KLDSampling(epsilon=args.kld, n_min=min(args.min_particles, args.particles), n_max=args.particles,
+        kld = KLDSampling(epsilon=args.kld, n_min=min(args.min_particles, n_particles), n_max=n_particles,
                           chunked=True)
     slow, fast = args.augmented
     aug = None
@@ -927,7 +982,7 @@ def run_kwargs(args: argparse.Namespace) -> dict:
     if not args.recovery < 1:
         raise ValueError(f"--recovery must be a fraction below 1; got {args.recovery:g}")
     return dict(
-        n_particles=args.particles, sensor=args.sensor, alphas=tuple(args.alphas), beams=args.beams,
+        n_particles=n_particles, sensor=args.sensor, alphas=tuple(args.alphas), beams=args.beams,
         max_range=args.max_range, init="reference" if args.track else "global", min_motion=tuple(args.min_motion),
         injection=args.injection, temper=args.temper, sensor_params={"sigma_hit": args.sigma_hit},
         min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
@@ -1101,6 +1156,8 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
         grid = _read_relaying_warnings(err, lio.read_map, args.map, format=fmt, **kw)
         map_desc = str(args.map)
     _check_free_space(grid, map_desc)
+    if args.particles == "auto":
+        args.particles = auto_particles(grid)
     check_memory(args.particles, min(args.beams, log.n_beams), args.sensor, n_cells=grid.data.size)  # before allocating
     t_read = time.perf_counter() - t_start
     quiet = args.quiet

@@ -377,3 +377,33 @@ def test_state_column_and_summary_section(sim_files, tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert {"first_localized_scan", "lost_intervals", "final_state"} <= set(s["state"])
     assert ("localized from scan" in text) or ("NOT localized" in text)
+
+
+def test_particles_auto_is_one_per_kld_bin_of_the_free_space_within_bounds():
+    from localize.grid import OccupancyGrid
+    from localize.kld import pose_bins
+
+    office = maps.office()
+    area = office.free.sum() * office.resolution ** 2
+    assert pose_bins(office) == round(area / (0.5 * 0.5) * 36)          # 36 heading bins of 10 degrees
+    assert cli.auto_particles(office) == pose_bins(office)
+    lo, hi = cli.AUTO_PARTICLES
+    small = OccupancyGrid(np.zeros((40, 40)), 0.1)                      # 16 m^2: below the lower bound
+    big = OccupancyGrid(np.zeros((1000, 1000)), 0.1)                    # 10,000 m^2: above the upper bound
+    assert (cli.auto_particles(small), cli.auto_particles(big)) == (lo, hi)
+    # the CLI's default is "auto"; run_kwargs resolves it with the map, and says so without one
+    args = cli.build_parser().parse_args(["run", "--log", "x.log", "--map", "m.yaml"])
+    assert args.particles == "auto"
+    kw = cli.run_kwargs(args, grid=office)
+    assert kw["n_particles"] == kw["kld"].n_max == pose_bins(office)
+    with pytest.raises(ValueError, match="sizes the cloud from the map: pass grid"):
+        cli.run_kwargs(args)
+    assert cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "x", "--map", "m", "--particles", "700"])
+                          )["n_particles"] == 700
+
+
+@pytest.mark.parametrize("value", ["0", "lots", "-5", "2.5"])
+def test_particles_option_names_what_it_accepts(value, capsys):
+    with pytest.raises(SystemExit):
+        cli.build_parser().parse_args(["run", "--log", "x", "--map", "m", "--particles", value])
+    assert "expected a whole number >= 1 or 'auto'" in capsys.readouterr().err

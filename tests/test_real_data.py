@@ -138,7 +138,8 @@ def test_global_localization_converges_in_most_seeds(logs, built, name, n_scans,
     sub = logs[name].select(slice(0, n_scans * every, every))
     steps = []
     for seed in range(3):
-        kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-"]))  # CLI defaults
+        kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-"]),  # CLI defaults
+                            grid=built[name])
         res = cli.localize_log(built[name], sub, rng=np.random.default_rng(seed), **kw)
         err = np.hypot(*(res.estimates[:, :2] - sub.poses[:, :2]).T)
         steps.append(cli.converged_at(err, 0.5, hold=20))

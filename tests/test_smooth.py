@@ -39,8 +39,8 @@ def _office_log(seed: int, n: int = 40) -> tuple[LaserLog, np.ndarray]:
     return log, run.poses
 
 
-def _cli_kwargs(*options: str) -> dict:
-    return cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-", *options]))
+def _cli_kwargs(*options: str, grid=None) -> dict:
+    return cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-", *options]), grid=grid)
 
 
 def _err(est, truth):
@@ -339,7 +339,7 @@ def test_real_log_smoothed_from_the_first_scan(shared_data):
         pytest.skip(f"{p} not found")
     log = lio.read_log(p).select(slice(0, 200))
     grid = map_from_log(log, resolution=0.05)
-    res = smooth.smooth_log(grid, log, rng=np.random.default_rng(0), **_cli_kwargs())
+    res = smooth.smooth_log(grid, log, rng=np.random.default_rng(0), **_cli_kwargs(grid=grid))
     fw = res.smooth.forward
     assert fw.first_localized() >= 2 and res.trace.first_localized() == 0
     loc = res.state == "localized"
