@@ -544,11 +544,28 @@ plt.show()
 # state *ended* "localized" while more than 1 m off:
 
 # %%
-results = Path("../benchmarks/RESULTS.md")
-text = results.read_text() if results.exists() else ""
-section = text[text.find("## bench_global"):] if "## bench_global" in text else ""
-section = section[:section.find("\n## ", 3)] if "\n## " in section[3:] else section
-print(section.strip() or "benchmarks/RESULTS.md has no bench_global section yet")
+def results_section(name):
+    """The section ``## name`` of benchmarks/RESULTS.md ("" if there is none)."""
+    results = Path("../benchmarks/RESULTS.md")
+    text = results.read_text() if results.exists() else ""
+    if f"## {name}" not in text:
+        return ""
+    section = text[text.find(f"## {name}"):]
+    return (section[:section.find("\n## ", 3)] if "\n## " in section[3:] else section).strip()
+
+
+def table_rows(section, n_columns=10):
+    """The data rows of the section's table, by their first cell (a list of the row's cells)."""
+    rows = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == n_columns and cells[1].isdigit():
+            rows[cells[0]] = cells
+    return rows
+
+
+section = results_section("bench_global")
+print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 
 # %% [markdown]
 # The target of the issue that asked for this benchmark — 95% success on every
@@ -576,11 +593,9 @@ print(section.strip() or "benchmarks/RESULTS.md has no bench_global section yet"
 # %% tags=["remove-cell"]
 if section:
     rows = {}
-    for line in section.splitlines():
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if len(cells) == 10 and cells[1].isdigit():
-            ok, runs = cells[2].split()[0].split("/")
-            rows[cells[0]] = dict(success=int(ok) / int(runs), off=int(cells[9]))
+    for name, cells in table_rows(section).items():
+        ok, runs = cells[2].split()[0].split("/")
+        rows[name] = dict(success=int(ok) / int(runs), off=int(cells[9]))
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rows), sorted(rows)
     claims = {"aces": 0.97, "intel": 0.93, "csail": 0.92, "freiburg-079": 0.75}
     for log_name, rate in claims.items():
@@ -942,20 +957,12 @@ plt.show()
 # checks these numbers against it):
 
 # %%
-results_md = Path("../benchmarks/RESULTS.md")
-text = results_md.read_text() if results_md.exists() else ""
-section = text[text.find("## bench_smooth"):] if "## bench_smooth" in text else ""
-section = section[:section.find("\n## ", 3)] if "\n## " in section[3:] else section
-print(section.strip() or "benchmarks/RESULTS.md has no bench_smooth section yet")
+section = results_section("bench_smooth")
+print(section or "benchmarks/RESULTS.md has no bench_smooth section yet")
 
 # %% tags=["remove-cell"]
 if section:
-    rows = {}
-    for line in section.splitlines():
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if len(cells) == 10 and cells[1].isdigit():
-            rows[cells[0]] = cells
-    every = rows["all"]
+    every = table_rows(section)["all"]
     assert every[2].startswith("164/200") and every[3].startswith("173/200"), every
     assert (every[4], every[5]) == ("13", "4"), every
     assert every[6] == "82% / 91%", every
