@@ -121,6 +121,7 @@ DEFAULTS: dict[str, Any] = {
     "min_ess": 0.0,
     "unknown_penalty": 0.0,
     "expand": (0.0, 0.0),
+    "unknown_beams": "skip",
 }
 
 
@@ -298,6 +299,7 @@ def localize_log(
     odometry_outliers: float = 0.0,
     min_trans: float = 1e-3,
     expand: tuple[float, float] = DEFAULTS["expand"],
+    unknown_beams: str = DEFAULTS["unknown_beams"],
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
@@ -392,6 +394,11 @@ def localize_log(
     expand : (metres, radians)
         Expansion resetting when the scans stop fitting an agreed cloud (see
         :func:`localize.mcl.run_filter`); (0, 0) never.
+    unknown_beams : {"skip", "score"}
+        "skip": once the cloud agrees on one place, beams that end in the
+        map's unknown cells there are left out of the update
+        (``skip_unknown_beams`` of :func:`localize.mcl.run_filter`); "score":
+        every beam is scored.
 
     Returns
     -------
@@ -400,6 +407,8 @@ def localize_log(
     from .mcl import MCL, RobustOdometry, run_filter
 
     check_rng(rng)
+    if unknown_beams not in ("skip", "score"):
+        raise ValueError(f"unknown_beams must be 'skip' or 'score'; got {unknown_beams!r}")
     n_particles = resolve_particles(n_particles, grid)
     if init not in ("global", "reference"):
         raise ValueError(f"init must be 'global' or 'reference'; got {init!r}")
@@ -440,7 +449,7 @@ def localize_log(
     tr = run_filter(f, k_scans, lambda k: (odo[k - 1], odo[k]), lambda k: (ranges[k], angles), grid=grid,
                     min_motion=tuple(min_motion), rules=rules, snapshot_steps=snap_steps,
                     snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
-                    restart_after=restart_after, expand=tuple(expand),
+                    restart_after=restart_after, expand=tuple(expand), skip_unknown_beams=unknown_beams == "skip",
                     callback=None if progress is None else progress.update_to)
     return RunResult(times=np.asarray(log.times), trace=tr)
 
@@ -787,6 +796,12 @@ FILTER_OPTIONS: tuple[FilterOption, ...] = (
         there, spread every particle by Gaussian noise of M metres and RAD radians, so that the next scans can
         find a robot that the odometry lost (wheel slip, a bump, odometry that misses the robot backing up --
         the Freiburg 079 log's does) (default {default}; 0 0 never). Example: --expand 0 0"""),
+    FilterOption("--unknown-beams", choices=("skip", "score"), help="""
+        'skip': once the cloud agrees on one place, the beams whose end point there lies in a cell the map
+        leaves unknown are left out of the update, and a scan with no other beam is not used; 'score': every
+        beam is scored, an end point in an unknown cell with one neutral score (default {default}). The map
+        cannot say whether such a beam fits, and scored it pulls the cloud of a robot that drives through a
+        region the map left unknown towards that region's known walls. Example: --unknown-beams score"""),
 )
 
 
@@ -988,6 +1003,7 @@ def run_kwargs(args: argparse.Namespace, grid: OccupancyGrid | None = None) -> d
         min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
         restart_after=max(int(args.restart_after), 0), min_ess=args.min_ess,
         unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"], expand=tuple(args.expand),
+        unknown_beams=args.unknown_beams,
     )
 
 

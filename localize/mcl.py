@@ -51,6 +51,7 @@ from .geometry import relative as _relative
 from .grid import OccupancyGrid
 from .kld import KLDSampling, kld_sample_size
 from .motion import OdometryMotion, ReversibleOdometry, VelocityMotion  # noqa: F401  (re-exported: their old home)
+from .sensors import sensor_poses
 
 __all__ = [
     "MCL",
@@ -1390,6 +1391,7 @@ def run_filter(
     expand: tuple[float, float] = (0.0, 0.0),
     odometry: ArrayLike | None = None,
     callback: Callable[[int], None] | None = None,
+    skip_unknown_beams: bool = False,
 ) -> RunTrace:
     """The one run driver: filter a sequence of controls and scans, with update gating and an honest state.
 
@@ -1468,6 +1470,17 @@ def run_filter(
         each odometry control).
     callback : callable, optional
         Called with ``k + 1`` after each step (progress bars).
+    skip_unknown_beams : bool
+        Once the cloud has agreed on one place (best cluster share and spread
+        within the rules, and the state past ``searching``), leave out of each
+        update the beams whose end point *at that place* falls in one of the
+        map's unknown cells (needs ``grid``). The map cannot say whether such
+        a beam fits; scored, it lets particles a metre away win by putting it
+        on some known wall instead, and a robot driving through a region the
+        map left unknown is pulled out of it. A scan with no other valid
+        beam is not used at all (the odometry alone carries the cloud), and
+        ``events`` counts the beams left out. While the filter searches, every
+        beam is scored: then each particle is its own hypothesis.
 
     Returns
     -------
@@ -1540,6 +1553,8 @@ def run_filter(
     good = bad = 0
     n_expanded = 0
     last_odom: NDArray | None = None
+    agreed_before = False      # the cloud agreed on one place at the last step (for skip_unknown_beams)
+    n_skipped = n_blind = 0
     t0 = _now()
     for k in range(t):
         st.resampled = False
@@ -1568,6 +1583,13 @@ def run_filter(
             ranges, angles = np.asarray(z[0], dtype=float), np.asarray(z[1], dtype=float)
             valid = np.isfinite(ranges) & (ranges > lo_r) & (ranges < hi_r)
             n_valid[k] = int(valid.sum())
+        if do_update and skip_unknown_beams and agreed_before and grid is not None and _is_scan(z):
+            z, n_skip = _skip_unknown_beams(grid, mcl, offset, z, hi_r)
+            if n_skip:
+                n_skipped += n_skip
+                if not np.any(np.asarray(z[0]) < hi_r):
+                    do_update = False
+                    n_blind += 1
         if do_update:
             mcl.update(*z)
             evals += int(n_p[k]) * (int(np.size(z[1])) if _is_scan(z) else 1)
@@ -1592,6 +1614,7 @@ def run_filter(
             fit[k] = _scan_fit(caster, pose, offset, ranges[valid], angles[valid], fit_d, rules.min_beams)
         off_map = grid is not None and on_map[k] == 0.0
         agreed = e.best_weight >= rules.min_share and e.spread <= rules.max_spread
+        agreed_before = agreed
         if do_update and np.isfinite(fit[k]):
             recent = (recent + [float(fit[k])])[-int(rules.fit_window):]
             fit_s = float(np.mean(recent))
@@ -1614,6 +1637,7 @@ def run_filter(
                               "localization again)"))
             poor = 0
             good = 0
+            agreed_before = False
             recent, fit_s = [], float("nan")
             if cur == "localized":
                 cur = "lost"
@@ -1621,6 +1645,7 @@ def run_filter(
             mcl.particles = np.asarray(mcl.sampler(mcl.n, mcl.rng), dtype=float)
             mcl.log_weights = np.full(mcl.n, -np.log(mcl.n))
             why = "every particle got zero likelihood" if degenerate else "every particle left the map's free space"
+            agreed_before = False
             events.append((k, f"{why}: particles re-drawn over the map (global localization again)"))
         elif mcl.needs_resampling() or (cur == "lost" and recovery_injection > 0 and do_update):
             if cur == "lost" and recovery_injection > 0 and mcl.sampler is not None:
@@ -1653,6 +1678,7 @@ def run_filter(
                 if cur == "localized" and bad >= rules.hold_lost:
                     cur = "lost"
         state[k] = cur
+        agreed_before = agreed_before and cur != "searching"
         if cur != prev:
             events.append((k, f"state {prev} -> {cur}"))
         if callback is not None:
@@ -1661,6 +1687,10 @@ def run_filter(
     if n_expanded:
         events.append((t - 1, f"the cloud was spread wider (expansion resetting) at {n_expanded} updates whose scan "
                               "did not fit the map at the agreed place"))
+    if n_skipped:
+        events.append((t - 1, f"{n_skipped} beams whose end point at the agreed place lies in the map's unknown cells "
+                              f"were left out of the updates" + (f"; {n_blind} scans had no other valid beam and "
+                                                                 "were not used" if n_blind else "")))
     return RunTrace(poses=out["poses"], means=out["means"], stds=out["stds"], spread=spread, best_weight=best,
                     n_eff=n_eff, n_particles=n_p, n_injected=n_inj, p_inject=p_inj, updated=updated,
                     resampled=resampled, degenerate=degen, n_valid=n_valid, fit=fit, on_map=on_map, state=state,
@@ -1692,6 +1722,28 @@ def _now() -> float:
     import time
 
     return time.perf_counter()
+
+
+def _skip_unknown_beams(grid: OccupancyGrid, mcl: MCL, offset: NDArray, z: tuple, max_range: float):
+    """``(z, n)``: the scan with the beams that end in an unknown cell at the cloud's mean pose set to
+    ``max_range`` (no return: not scored), and how many those were."""
+    w, p = mcl.weights, mcl.particles
+    mean = np.array([w @ p[:, 0], w @ p[:, 1], np.arctan2(w @ np.sin(p[:, 2]), w @ np.cos(p[:, 2]))])
+    sx, sy, sth = sensor_poses(mean[None, :], offset)[0]
+    r = np.array(z[0], dtype=float)
+    a = np.asarray(z[1], dtype=float)
+    valid = np.isfinite(r) & (r < max_range)
+    rr = np.where(valid, r, 0.0)
+    pts = np.stack([sx + rr * np.cos(sth + a), sy + rr * np.sin(sth + a)], axis=1)
+    blind = np.zeros(r.shape, dtype=bool)
+    inside = np.flatnonzero(valid & grid.contains(pts))
+    if inside.size:
+        cells = grid.world_to_cell(pts[inside])
+        blind[inside] = grid.unknown[cells[:, 0], cells[:, 1]]
+    n = int(blind.sum())
+    if n:
+        r[blind] = max_range
+    return (r, a, *z[2:]), n
 
 
 def _free_share(grid: OccupancyGrid, free: NDArray, particles: NDArray, weights: NDArray) -> float:

@@ -781,3 +781,86 @@ def test_update_with_a_non_uniform_prior_is_bayes_rule():
     f.resample()
     n = f.n
     assert abs(f.particles[:, 0].mean() - 2.8) < 4 * np.sqrt(0.2 / n) + (x[1] - x[0])
+
+
+# ----------------------------------------------------------------- beams that end where the map says nothing
+def _office_with_unknown_east(x_from: float = 6.5):
+    """The office map with every cell east of ``x_from`` metres unknown."""
+    from localize.grid import OccupancyGrid
+
+    g = office()
+    data = np.array(g.data, copy=True)
+    cols = np.arange(data.shape[1]) * g.resolution + g.origin[0] + g.resolution / 2
+    data[:, cols > x_from] = np.nan
+    return OccupancyGrid(data, g.resolution, origin=g.origin)
+
+
+class _RecordingField:
+    """A likelihood field that remembers the ranges of every update it scores."""
+
+    def __init__(self, grid):
+        from localize.sensors import LikelihoodField
+
+        self.inner = LikelihoodField(grid, 8.0, sigma_hit=0.2)
+        self.sensor_offset, self.min_range, self.max_range = self.inner.sensor_offset, 0.0, 8.0
+        self.sigma_hit = 0.2
+        self.seen = []
+
+    def log_likelihood(self, poses, ranges, angles):
+        self.seen.append(np.array(ranges, dtype=float))
+        return self.inner.log_likelihood(poses, ranges, angles)
+
+
+def test_skip_unknown_beams_leaves_out_exactly_the_beams_that_end_in_unknown_cells():
+    from localize.mcl import _skip_unknown_beams
+
+    g = _office_with_unknown_east(6.5)
+    f = MCL.gaussian([5.0, 5.5, 0.0], (1e-6, 1e-6, 1e-6), 50, (0.0,) * 4, XYSensor(), rng=np.random.default_rng(0))
+    angles = np.array([0.0, np.pi, np.pi / 2, 0.0, 0.0])
+    ranges = np.array([2.5, 2.5, 0.5, 8.0, 1.0])      # east into unknown, west, north, no return, east but short
+    z, n = _skip_unknown_beams(g, f, np.zeros(3), (ranges, angles), 8.0)
+    assert n == 1
+    np.testing.assert_array_equal(z[0], [8.0, 2.5, 0.5, 8.0, 1.0])
+    np.testing.assert_array_equal(z[1], angles)
+    assert ranges[0] == 2.5                           # the caller's scan is not changed
+
+
+def test_run_filter_skips_unknown_beams_only_once_the_cloud_agrees():
+    from localize.mcl import StateRules, run_filter
+
+    g = _office_with_unknown_east(6.5)
+    angles = np.array([0.0, 0.1, -0.1])
+    scan = (np.full(3, 2.5), angles)                  # from (5, 5.5) heading east every end point is unknown
+    rules = StateRules(hold=1, min_fit=0.0, restart_fit=0.0, probe_shift=0.0, min_beams=1)
+    runs = {}
+    for skip in (True, False):
+        sensor = _RecordingField(g)
+        f = MCL.gaussian([5.0, 5.5, 0.0], (0.02, 0.02, 0.01), 300, (0.0,) * 4, sensor, rng=np.random.default_rng(1))
+        tr = run_filter(f, 4, lambda k: None, lambda k: scan, grid=g, rules=rules, skip_unknown_beams=skip)
+        runs[skip] = (tr, sensor.seen)
+    tr, seen = runs[True]
+    # step 0: the cloud has not agreed yet (no previous step), so the scan is scored; after that it agrees
+    # and every beam ends in unknown there: the scans are not used, and the trace says so
+    assert list(tr.updated) == [True, False, False, False]
+    assert len(seen) == 1 and np.all(seen[0] == 2.5)
+    assert any("left out" in t and "3 scans had no other valid beam" in t for _, t in tr.events)
+    tr_all, seen_all = runs[False]
+    assert tr_all.updated.all() and len(seen_all) == 4
+    assert not any("left out" in t for _, t in tr_all.events)
+
+
+def test_run_filter_scores_every_beam_while_searching():
+    """With a uniform cloud nothing has been agreed: skip_unknown_beams changes nothing at all."""
+    from localize.mcl import run_filter
+
+    g = _office_with_unknown_east(6.5)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 9)
+    scan = (np.full(9, 2.0), angles)
+    out = []
+    for skip in (True, False):
+        sensor = _RecordingField(g)
+        f = MCL.uniform(g, 2000, (0.0,) * 4, sensor, rng=np.random.default_rng(2), free_space_only=True)
+        tr = run_filter(f, 2, lambda k: None, lambda k: scan, grid=g, skip_unknown_beams=skip)
+        out.append((tr.poses, sensor.seen))
+    np.testing.assert_array_equal(out[0][0], out[1][0])
+    assert all(np.all(s == 2.0) for s in out[0][1])

@@ -516,6 +516,16 @@ plt.show()
 #   robot drives there), with no penalty: a penalty per update pushes a cloud
 #   whose robot drives through a region the map left unknown towards that
 #   region's known edge, metres from the robot (the benchmark below measured it).
+# * **`--unknown-beams skip`** — once the cloud has agreed on one place, a beam
+#   whose end point *at that place* lies in an unknown cell is left out of the
+#   update, and a scan with no other beam is not used: the odometry alone
+#   carries the cloud. The neutral score is fair while the filter searches
+#   (every particle is its own hypothesis), but not to a cloud that agrees: a
+#   particle half a metre away that puts such a beam on some known wall, or
+#   moves a beam that misses a moved cupboard into the unknown, scores better
+#   than the robot's pose. Driving through the region a map leaves unknown,
+#   scan after scan of such small wins pulled the cloud more than a metre out
+#   of it. AMCL has no such rule; `--unknown-beams score` scores every beam.
 # * **`--expand M RAD`, off by default** — expansion resetting (Ueda et al.
 #   2004): when the cloud agrees on a place but the scan just used does not fit
 #   the map there, every particle is moved by Gaussian noise of M metres and RAD
@@ -569,24 +579,25 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 
 # %% [markdown]
 # The target of the issue that asked for this benchmark — 95% success on every
-# log — is reached on ACES only (97%); Intel reaches 93%, CSAIL 92% and
-# Freiburg 079 75%. ACES owes its rate to the map-sized initial cloud: starting
-# in a stretch of that building that looks the same in several places, a fixed
-# cloud of 50,000 particles often localized only after the first 30% of the
-# run. The real logs' other failures are mostly short excursions beyond 1 m in
-# runs that end well, at the same scans for every seed: in the square the
-# degraded map leaves unknown, the scans carry less evidence and the cloud
-# drifts with the odometry; and on Freiburg, whose odometry reports the
-# robot's speed without its sign, the robot backs up for thirty scans while
-# its odometry says forwards. The simulated Willow runs succeed about half of
-# the time. Willow is the largest of the five buildings, its simulated robot
-# turns on the spot wherever it is blocked, and unmapped clutter stands in its
-# way; started *at the true pose* (`--track`) on the same degraded maps, some
-# of those runs lose the robot as well, so tracking falls short there, not
-# only the global search.
+# log — is reached on Intel, ACES and CSAIL (98% each), not on Freiburg 079
+# (80%) nor on the simulated Willow runs (42%). Two defaults carry the real
+# logs: the map-sized initial cloud (ACES: starting in a stretch of that
+# building that looks the same in several places, a fixed cloud of 50,000
+# particles often localized only after the first 30% of the run) and leaving
+# out the beams that end in unknown cells once the cloud agrees (without it,
+# runs whose robot drove through the square the degraded map leaves unknown
+# failed at every seed: the cloud was pulled out of the square). Freiburg's
+# remaining failures are mostly two start scans, at every seed: its odometry
+# reports the robot's speed without its sign, and there the robot backs up
+# for thirty scans while its odometry says forwards. Willow is the largest of
+# the five buildings, its simulated robot turns on the spot wherever it is
+# blocked, unmapped clutter stands in its way, and much of its map is unknown,
+# so that a wrong place whose beams end in the unknown can look as good as the
+# right one.
 #
 # What the table does show is honesty: no run ended "localized" while more
-# than 1 m off; the failures end "lost" or "searching" and say so. The next
+# than 1 m off. A failed run ended either "lost" or "searching", and said so,
+# or localized again within 1 m of the robot after it had left it. The next
 # cell checks these statements against the table, so that a re-run of the
 # benchmark cannot silently contradict them.
 
@@ -597,11 +608,10 @@ if section:
         ok, runs = cells[2].split()[0].split("/")
         rows[name] = dict(success=int(ok) / int(runs), off=int(cells[9]))
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rows), sorted(rows)
-    claims = {"aces": 0.97, "intel": 0.93, "csail": 0.92, "freiburg-079": 0.75}
+    claims = {"aces": 0.98, "intel": 0.98, "csail": 0.98, "freiburg-079": 0.80, "willow": 0.42}
     for log_name, rate in claims.items():
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
-    assert [n for n, r in rows.items() if r["success"] >= 0.95] == ["aces"]
-    assert 0.45 <= rows["willow"]["success"] <= 0.55
+    assert sorted(n for n, r in rows.items() if r["success"] >= 0.95) == ["aces", "csail", "intel"]
     assert all(r["off"] == 0 for r in rows.values())
 
 # %% tags=["remove-cell"]
@@ -945,14 +955,16 @@ plt.show()
 # %% [markdown]
 # On the benchmark's logs and degraded maps (`benchmarks/bench_smooth.py`: the
 # same runs as `bench_global`, 20 starts x 2 seeds per data set, each
-# trajectory judged by bench_global's rule), smoothing turned 13 of the
-# forward pass's failures into successes and 4 successes into failures: 173
-# of 200 runs succeed instead of 164. More of each log is localized — 91% of
-# the scans instead of 82% — because the backward pass localizes the start
-# that the forward pass spends searching. It cannot help where both passes go
-# wrong at the same place (the region a degraded map leaves unknown,
-# Freiburg's unsigned odometry, many of the simulated Willow runs). It is an
-# offline tool: it needs the whole log and takes two to three times the time
+# trajectory judged by bench_global's rule), smoothing turned 8 of the
+# forward pass's failures into successes and 7 successes into failures: 170
+# of 200 runs succeed instead of 169. Where it helps is the share of each log
+# that is localized — 90% of the scans instead of 80% — because the backward
+# pass localizes the start that the forward pass spends searching. It cannot
+# help where both passes go wrong at the same place (Freiburg's unsigned
+# odometry, many of the simulated Willow runs), and a pass that is wrong with
+# confidence can win a stretch: count the runs with a scan localized more
+# than 1 m off, in the table's next-to-last column. It is an
+# offline tool: it needs the whole log and takes more than twice the time
 # of one pass. The table, from `benchmarks/RESULTS.md` (the cell after it
 # checks these numbers against it):
 
@@ -963,9 +975,11 @@ print(section or "benchmarks/RESULTS.md has no bench_smooth section yet")
 # %% tags=["remove-cell"]
 if section:
     every = table_rows(section)["all"]
-    assert every[2].startswith("164/200") and every[3].startswith("173/200"), every
-    assert (every[4], every[5]) == ("13", "4"), every
-    assert every[6] == "82% / 91%", every
+    assert every[2].startswith("169/200") and every[3].startswith("170/200"), every
+    assert (every[4], every[5]) == ("8", "7"), every
+    assert every[6] == "80% / 90%", every
+    seconds = [float(v) for v in every[9].split("/")]
+    assert seconds[1] > 2 * seconds[0], every          # "more than twice the time of one pass"
 
 # %% [markdown]
 # ## Summary
