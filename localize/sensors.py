@@ -550,10 +550,14 @@ class LikelihoodField:
         at ``max_dist`` (a miss, as in ROS AMCL).
     unknown_neutral : bool
         With ``unknown_is_obstacle=False``: give end points in unknown cells
-        one neutral score instead, the same for every pose -- that of an end
-        point dropped at a random place of the known map
-        (``unknown_log_prob``): the map says nothing there. The command line
-        uses it (measured in ``benchmarks/bench_global.py``).
+        one neutral score instead, the same for every pose: the log of the
+        *mean likelihood* of an end point dropped at a random place of the
+        known map (``unknown_log_prob``): the map says nothing there. It is
+        higher than the mean *log*-likelihood of such an end point (by
+        Jensen's inequality), i.e. lenient to a beam the map cannot judge;
+        the mean log-likelihood was measured in
+        ``benchmarks/bench_global.py`` and lost on the real logs. The
+        command line uses it.
 
     Examples
     --------
@@ -622,8 +626,9 @@ class LikelihoodField:
         outside = float(self.point_log_prob(self.max_dist))
         self.unknown_log_prob = outside
         if not g.unknown_is_obstacle and self.unknown_neutral:
-            # the map says nothing about its unknown cells: an end point there scores like one dropped at a
-            # random place of the known map (the same for every pose). Off the map it is a miss, as in AMCL.
+            # the map says nothing about its unknown cells: an end point there scores the log of the mean
+            # likelihood of one dropped at a random place of the known map (the same for every pose). Off the
+            # map it is a miss, as in AMCL.
             known = ~g.unknown
             if known.any() and not known.all():
                 self.unknown_log_prob = float(np.log(np.mean(np.exp(cells[known]))))
