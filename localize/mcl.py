@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import resample as _rs
 from ._checks import check_count, check_grid, check_nonnegative, check_poses, check_positive, check_rng
-from .geometry import as_poses, wrap_angle
+from .geometry import as_poses, mean_pose, wrap_angle
 from .geometry import relative as _relative
 from .grid import OccupancyGrid
 from .kld import KLDSampling, kld_sample_size
@@ -1689,8 +1689,8 @@ def run_filter(
                               "did not fit the map at the agreed place"))
     if n_skipped:
         events.append((t - 1, f"{n_skipped} beams whose end point at the agreed place lies in the map's unknown cells "
-                              f"were left out of the updates" + (f"; {n_blind} scans had no other valid beam and "
-                                                                 "were not used" if n_blind else "")))
+                              f"were left out of the updates" + (f"; {n_blind} scan{'s' * (n_blind != 1)} had no "
+                                                                 "other valid beam and were not used" if n_blind else "")))
     return RunTrace(poses=out["poses"], means=out["means"], stds=out["stds"], spread=spread, best_weight=best,
                     n_eff=n_eff, n_particles=n_p, n_injected=n_inj, p_inject=p_inj, updated=updated,
                     resampled=resampled, degenerate=degen, n_valid=n_valid, fit=fit, on_map=on_map, state=state,
@@ -1727,19 +1727,15 @@ def _now() -> float:
 def _skip_unknown_beams(grid: OccupancyGrid, mcl: MCL, offset: NDArray, z: tuple, max_range: float):
     """``(z, n)``: the scan with the beams that end in an unknown cell at the cloud's mean pose set to
     ``max_range`` (no return: not scored), and how many those were."""
-    w, p = mcl.weights, mcl.particles
-    mean = np.array([w @ p[:, 0], w @ p[:, 1], np.arctan2(w @ np.sin(p[:, 2]), w @ np.cos(p[:, 2]))])
-    sx, sy, sth = sensor_poses(mean[None, :], offset)[0]
+    sx, sy, sth = sensor_poses(mean_pose(mcl.particles, mcl.weights)[None, :], offset)[0]
     r = np.array(z[0], dtype=float)
     a = np.asarray(z[1], dtype=float)
     valid = np.isfinite(r) & (r < max_range)
     rr = np.where(valid, r, 0.0)
-    pts = np.stack([sx + rr * np.cos(sth + a), sy + rr * np.sin(sth + a)], axis=1)
-    blind = np.zeros(r.shape, dtype=bool)
-    inside = np.flatnonzero(valid & grid.contains(pts))
-    if inside.size:
-        cells = grid.world_to_cell(pts[inside])
-        blind[inside] = grid.unknown[cells[:, 0], cells[:, 1]]
+    cells = grid.world_to_cell(np.stack([sx + rr * np.cos(sth + a), sy + rr * np.sin(sth + a)], axis=1),
+                               outside="flag")
+    blind = valid & (cells[:, 0] >= 0)
+    blind[blind] = grid.unknown[cells[blind, 0], cells[blind, 1]]
     n = int(blind.sum())
     if n:
         r[blind] = max_range
