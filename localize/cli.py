@@ -306,7 +306,8 @@ def localize_log(
     The keyword defaults are those of ``localize run`` (:data:`DEFAULTS`):
     an initial cloud sized to the map (:func:`auto_particles`) shrunk by
     KLD-sampling, ``sigma_hit`` 0.2 m, tempering 0.3, a 5 cm minimum range,
-    particles allowed in unknown cells, restarts on (expansion resetting off).
+    particles allowed in unknown cells, restarts on (expansion resetting off),
+    beams that end in unknown cells at an agreed place left out (``unknown_beams``).
 
     The filtering loop is :func:`localize.mcl.run_filter`, the one run driver
     (update gating, estimates, the searching / localized / lost state); this
