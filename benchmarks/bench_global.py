@@ -118,6 +118,26 @@ def load(name: str, root: Path | None = None):
     return _DATA[name]
 
 
+class _NoReturn:
+    """A simulated laser whose beams with nothing in range read ``max_range`` (no return), not a hit near it.
+
+    ``laser`` is a :class:`localize.sensors.BeamModel`; a beam whose ray-cast range is ``max_range`` and
+    whose drawn reading lies within 5 ``sigma_hit`` of it (the hit part of the mixture) reads ``max_range``.
+    Short and random readings of such beams stay as drawn.
+    """
+
+    def __init__(self, laser) -> None:
+        self.laser = laser
+
+    def sample(self, poses, angles, rng: np.random.Generator) -> np.ndarray:
+        m = self.laser
+        expected = m.expected(poses, angles)
+        z = m.sample_expected(expected, rng)
+        far = (expected >= m.max_range) & (z >= m.max_range - 5.0 * m.sigma_hit)
+        z[far] = m.max_range
+        return z
+
+
 def willow_log(world: OccupancyGrid, n_scans: int, rng: np.random.Generator):
     """A simulated robot in the Willow map: 181 beams over 180 degrees, 30 m range, unmapped clutter.
 
@@ -134,6 +154,11 @@ def willow_log(world: OccupancyGrid, n_scans: int, rng: np.random.Generator):
     treats unknown as "the map does not know" (the CLI, ROS AMCL) can agree:
     measured, an exact scan at the true pose then scored up to 9 nats worse
     than the same scan turned by 5 degrees.
+
+    A beam with nothing within 30 m reports "no return" (30 m), as a real
+    laser does (:class:`_NoReturn`): the beam model's truncated hit density
+    about an expected 30 m would otherwise draw readings a few centimetres
+    short of it, end points in mid-air that no real scanner produces.
     """
     from localize.sensors import BeamModel
 
@@ -141,7 +166,7 @@ def willow_log(world: OccupancyGrid, n_scans: int, rng: np.random.Generator):
     cluttered, _ = sim.add_clutter(world, 10, rng)
     see_through = OccupancyGrid(cluttered.data, cluttered.resolution, origin=cluttered.origin,
                                 unknown_is_obstacle=False)
-    laser = BeamModel(see_through, 30.0, method="exact", **sim.DEFAULT_SCAN_NOISE)
+    laser = _NoReturn(BeamModel(see_through, 30.0, method="exact", **sim.DEFAULT_SCAN_NOISE))
     run = sim.range_run(cluttered, rng, n_steps=n_scans, angles=angles, max_range=30.0, speed=0.5, dt=1.0,
                         n_clutter=0, sensor=laser, when_blocked="open_side")
     return io.LaserLog(times=run.times, odometry=run.odometry, ranges=run.ranges, angles=run.angles,
@@ -247,8 +272,8 @@ def summarize(rows: list[dict]) -> list[dict]:
     return out
 
 
-def write_section(text: str) -> None:
-    """Put ``text`` (starting with "## bench_global") into RESULTS.md: in place of the old section, or
+def write_section(text: str, name: str = "bench_global") -> None:
+    """Put ``text`` (starting with "## " + ``name``) into RESULTS.md: in place of the old section, or
     before the first benchmark section that sorts after it (the order of run_all.py)."""
     import re
 
@@ -256,14 +281,14 @@ def write_section(text: str) -> None:
     old = path.read_text() if path.exists() else "# Benchmark results\n"
     heads = [(m.start(), m.group(1)) for m in re.finditer(r"^## (bench_\w+)", old, flags=re.M)]
     body = text.strip() + "\n\n"
-    mine = [i for i, (_, name) in enumerate(heads) if name == "bench_global"]
+    mine = [i for i, (_, head) in enumerate(heads) if head == name]
     if mine:
         i = mine[0]
         start = heads[i][0]
         stop = heads[i + 1][0] if i + 1 < len(heads) else len(old)
         new = old[:start] + body + old[stop:]
     else:
-        after = [pos for pos, name in heads if name > "bench_global"]
+        after = [pos for pos, head in heads if head > name]
         pos = after[0] if after else len(old)
         new = old[:pos] + body + old[pos:]
     path.write_text(new)
@@ -282,11 +307,17 @@ def main(argv=None) -> int:
                     help="options of `localize run` for every run (experiments), e.g. --args '--particles 20000'")
     ap.add_argument("--clean-map", action="store_true", help="diagnostics: localize on the undegraded map")
     ap.add_argument("--write", action="store_true", help="write the bench_global section of RESULTS.md")
+    ap.add_argument("--section", default="bench_global", metavar="NAME",
+                    help="the section --write writes (default bench_global); an experiment with --set or --args "
+                         "gets its own, e.g. bench_global_z_short_0")
     ap.add_argument("--json", type=Path, default=None,
                     help="also write every run's row to this file (JSON lines, as the runs finish)")
     ap.add_argument("--table-from", type=Path, default=None, metavar="FILE",
                     help="do not run: print the table of the runs stored in FILE by --json (e.g. of a run cut short)")
     args = ap.parse_args(argv)
+    if args.write and (args.set or args.args or args.clean_map) and args.section == "bench_global":
+        ap.error("--write with --set, --args or --clean-map needs --section NAME: the bench_global section is "
+                 "the table of the defaults")
     opts = {}
     for kv in args.set:
         k, v = kv.split("=", 1)
@@ -336,9 +367,9 @@ def main(argv=None) -> int:
     cmd = "nice python benchmarks/bench_global.py" + "".join(
         f" {a}" for a in (argv if argv is not None else sys.argv[1:]) if a != "--write")
     text = "\n".join([
-        "## bench_global",
+        f"## {args.section}",
         "",
-        f"Global localization with the CLI defaults on degraded maps (walls +0.10-0.15 m, obstacles added and "
+        f"Global localization with the CLI defaults{' except the overrides named at the end' if opts or args.args else ''} on degraded maps (walls +0.10-0.15 m, obstacles added and "
         f"removed, a region unknown), raw odometry; {args.starts} starts x {args.seeds} seeds per log, runs of "
         f"{args.scans} scans or to the end of the log. Success: within {SUCCESS_M} m and 10 deg of the reference "
         f"within the first {WITHIN:.0%} of the run, within {STAY_M} m after. `{cmd.strip()}`; "
@@ -352,7 +383,7 @@ def main(argv=None) -> int:
     if sink:
         sink.close()
     if args.write:
-        write_section(text)
+        write_section(text, args.section)
     return 0
 
 

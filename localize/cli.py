@@ -109,6 +109,7 @@ DEFAULTS: dict[str, Any] = {
     "max_range": 30.0,
     "alphas": (0.05, 0.01, 0.02, 0.05),
     "sigma_hit": 0.2,
+    "z_short": 0.2,
     "temper": 0.3,
     "min_motion": (0.2, 0.3),
     "injection": 0.0,
@@ -300,12 +301,14 @@ def localize_log(
     min_trans: float = 1e-3,
     expand: tuple[float, float] = DEFAULTS["expand"],
     unknown_beams: str = DEFAULTS["unknown_beams"],
+    z_short: float = DEFAULTS["z_short"],
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
     The keyword defaults are those of ``localize run`` (:data:`DEFAULTS`):
     an initial cloud sized to the map (:func:`auto_particles`) shrunk by
-    KLD-sampling, ``sigma_hit`` 0.2 m, tempering 0.3, a 5 cm minimum range,
+    KLD-sampling, ``sigma_hit`` 0.2 m, short readings weighted 0.2
+    (``z_short``), tempering 0.3, a 5 cm minimum range,
     particles allowed in unknown cells, restarts on (expansion resetting off),
     beams that end in unknown cells at an agreed place left out (``unknown_beams``).
 
@@ -400,6 +403,12 @@ def localize_log(
         map's unknown cells there are left out of the update
         (``skip_unknown_beams`` of :func:`localize.mcl.run_filter`); "score":
         every beam is scored.
+    z_short : float
+        Likelihood field: weight in [0, 1] of short readings from unmapped
+        obstacles (``z_short`` of :class:`localize.sensors.LikelihoodField`:
+        no returned beam scores below that of a likely short reading);
+        ``sensor_params["z_short"]`` wins over it; 0 scores PR table 6.3 exactly.
+        Ignored by the beam model, whose mixture has its own ``z_short``.
 
     Returns
     -------
@@ -427,6 +436,8 @@ def localize_log(
                           n_max=int(n_particles), chunked=True)
     if sensor == "likelihood" and min_range:
         params.setdefault("min_range", float(min_range))
+    if sensor == "likelihood":
+        params.setdefault("z_short", z_short)
     model = make_sensor(sensor, grid, mr, log.sensor_offset, temper=temper, **params)
     ranges = np.minimum(log.ranges, mr)
     motion: Any = ReversibleOdometry(alphas, min_trans=min_trans)
@@ -690,6 +701,7 @@ _seed = _number_type(int, "a whole number >= 0 (a random generator's seed)", lam
 _nonneg_int = _number_type(int, "a whole number >= 0", lambda v: v >= 0, "nonneg_int")
 _unit_fraction = _number_type(float, "a number in (0, 1]", lambda v: 0 < v <= 1, "unit_fraction")
 _fraction = _number_type(float, "a fraction in [0, 1)", lambda v: 0 <= v < 1, "fraction")
+_weight = _number_type(float, "a weight in [0, 1]", lambda v: 0 <= v <= 1, "weight")
 
 
 def _shown(value: Any) -> str:
@@ -757,6 +769,13 @@ FILTER_OPTIONS: tuple[FilterOption, ...] = (
         about the ray-cast range (beam model), metres (default {default}): the map's error sets it, not the
         laser's (a few cm) -- real maps draw walls 0.1-0.15 m off and furniture moves.
         Example: --sigma-hit 0.3"""),
+    FilterOption("--z-short", _weight, metavar="W", help="""
+        likelihood field: weight in [0, 1] of short readings, beams stopped by something the map does not
+        show (people, chairs, a door shut since the map was made) (default {default}). No returned beam then
+        scores below W*lambda*exp(-lambda*z) + z_rand/max_range (lambda 0.5 per metre), so a short reading
+        that ends in the map's free space counts as a likely unmapped obstacle, not as a miss that rules the
+        true pose out. 0 scores the end points as Probabilistic Robotics table 6.3 does. Example:
+        --z-short 0"""),
     FilterOption("--temper", _unit_fraction, metavar="T", help="""
         multiply each scan's log-likelihood by T in (0, 1] (default {default}): neighbouring beams see the
         same wall, so 30 beams are not 30 independent measurements, and an over-confident filter locks onto
@@ -955,8 +974,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="seed of the simulation and of the filter (default 0). Example: --seed 3")
     dm.add_argument("--steps", type=_positive_int, default=150, metavar="K",
                     help="number of scans to simulate (default 150). Example: --steps 300")
-    dm.add_argument("--particles", type=_positive_int, default=5000, metavar="N",
-                    help="number of particles (default 5000). Example: --particles 10000")
+    dm.add_argument("--particles", type=_particles, default="auto", metavar="N",
+                    help="number of particles, or 'auto' (default, as for localize run: one per pose cell of the "
+                         "office's free space, about 30,000). "
+                         "Example: --particles 10000")
     dm.add_argument("--no-animate", action="store_true", help="skip the animation (faster).")
     _add_frames_and_quiet(dm, frames=60)  # passed on to `localize run`
     run.set_defaults(_option_dests={s: a.dest for a in run._actions for s in a.option_strings})
@@ -1004,7 +1025,7 @@ def run_kwargs(args: argparse.Namespace, grid: OccupancyGrid | None = None) -> d
         min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
         restart_after=max(int(args.restart_after), 0), min_ess=args.min_ess,
         unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"], expand=tuple(args.expand),
-        unknown_beams=args.unknown_beams,
+        unknown_beams=args.unknown_beams, z_short=args.z_short,
     )
 
 
@@ -1091,6 +1112,10 @@ def _apply_amcl(args, out: TextIO, err: TextIO) -> dict:
             kept.append(dest)
         else:
             setattr(args, dest, st[dest])
+    if "z_short" in given:  # AMCL's likelihood field has no short-reading term: off unless asked for
+        kept.append("z_short")
+    else:
+        args.z_short = 0.0
     if args.sensor == st["sensor"]:
         extras["sensor_params"] = dict(st["sensor_params"])
     extras.update(kld=st["kld"], augmented=st["augmented"], resample_threshold=st["resample_threshold"])

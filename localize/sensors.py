@@ -47,6 +47,7 @@ from ._checks import (
     check_max_range,
     check_number,
     check_positive,
+    check_probability,
     check_rng,
     check_sensor_poses,
 )
@@ -558,6 +559,19 @@ class LikelihoodField:
         the mean log-likelihood was measured in
         ``benchmarks/bench_global.py`` and lost on the real logs. The
         command line uses it.
+    z_short : float
+        Weight in [0, 1] of unexpected short readings (PR's ``p_short``, a
+        person or a chair in front of the mapped wall). With ``z_short > 0``
+        no returned beam scores below :meth:`short_floor` of its range,
+        ``log(z_rand / max_range + z_short lambda_short e^(-lambda_short z))``:
+        a short reading that ends in free space, far from any wall, is then
+        explained as a likely unmapped obstacle instead of counted as a miss.
+        The floor is largest for short readings and fades to the plain
+        ``z_rand`` term for long ones. It is a floor, not a fourth mixture
+        weight, so ``z_hit + z_rand`` still sums to 1. Default 0 (PR table
+        6.3 exactly); the command line uses 0.2 (``--z-short``).
+    lambda_short : float
+        Rate (1/metre, > 0) of the exponential short-reading density.
 
     Examples
     --------
@@ -575,8 +589,10 @@ class LikelihoodField:
                  sigma_hit: float = 0.2, *, max_dist: float | None = None,
                  sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
                  temper: float = 1.0, min_range: float = 0.0, unknown_is_obstacle: bool | None = None,
-                 unknown_neutral: bool = True) -> None:
+                 unknown_neutral: bool = True, z_short: float = 0.0, lambda_short: float = 0.5) -> None:
         self.unknown_neutral = bool(unknown_neutral)
+        self.z_short = check_probability(z_short, "z_short")
+        self.lambda_short = check_positive(lambda_short, "lambda_short", "per metre")
         grid = check_grid(grid)
         if unknown_is_obstacle is not None and bool(unknown_is_obstacle) != grid.unknown_is_obstacle:
             grid = OccupancyGrid(grid.data, grid.resolution, origin=grid.origin,
@@ -601,7 +617,25 @@ class LikelihoodField:
 
     def __repr__(self) -> str:
         return (f"LikelihoodField(max_range={self.max_range:g}, z_hit={self.z_hit:g}, z_rand={self.z_rand:g}, "
-                f"sigma_hit={self.sigma_hit:g}, max_dist={self.max_dist:g})")
+                f"sigma_hit={self.sigma_hit:g}, max_dist={self.max_dist:g}"
+                + (f", z_short={self.z_short:g}" if self.z_short > 0 else "") + ")")
+
+    def short_floor(self, z: ArrayLike) -> NDArray[np.float64]:
+        """The lowest score a returned beam of range ``z`` can get: ``log(z_rand / max_range + z_short p_short(z))``.
+
+        ``p_short(z) = lambda_short e^(-lambda_short z)``. With ``z_short = 0`` this is ``log(z_rand / max_range)``,
+        which every end point already scores at least, so the floor changes nothing.
+
+        Examples
+        --------
+        >>> from localize.maps import office
+        >>> lf = LikelihoodField(office(), 8.0, z_hit=0.9, z_rand=0.1, sigma_hit=0.1, z_short=0.2)
+        >>> lf.short_floor([0.5, 7.5]).round(3)
+        array([-2.404, -4.21 ])
+        """
+        z = np.asarray(z, dtype=float)
+        lam = self.lambda_short
+        return np.log(self.z_rand / self.max_range + self.z_short * lam * np.exp(-lam * z))
 
     def point_log_prob(self, d: ArrayLike) -> NDArray[np.float64]:
         """``log(z_hit N(d; 0, sigma_hit^2) + z_rand / max_range)`` for end-point distances ``d``.
@@ -683,10 +717,12 @@ class LikelihoodField:
                 g = self.grid
                 if not g.unknown_is_obstacle and self.unknown_neutral and bool(g.contains([ex, ey])) and g.unknown[
                         tuple(g.world_to_cell([ex, ey]))]:
-                    q += self.unknown_log_prob          # the map says nothing here
-                    continue
-                d = g.distance_at([ex, ey], outside=self.max_dist)
-                q += float(self.point_log_prob(d))
+                    beam = self.unknown_log_prob          # the map says nothing here
+                else:
+                    beam = float(self.point_log_prob(g.distance_at([ex, ey], outside=self.max_dist)))
+                if self.z_short > 0:                      # an unmapped obstacle in front explains it at least this well
+                    beam = max(beam, float(self.short_floor(zk)))
+                q += beam
             out[n] = q * self.temper
         return out
 
@@ -700,7 +736,8 @@ class LikelihoodField:
 
         Max-range readings and readings ``<= min_range`` are skipped. End points off the map score as at
         ``max_dist``; poses far outside the map are clipped onto the padded
-        table's border cells, which hold that score.
+        table's border cells, which hold that score. With ``z_short > 0`` no
+        beam scores below :meth:`short_floor` of its range.
 
         Examples
         --------
@@ -742,7 +779,10 @@ class LikelihoodField:
         i = ey.astype(np.int32)
         i *= self._wp
         i += j
-        ll = self._flat.take(i).sum(axis=1, dtype=np.float64)
+        vals = self._flat.take(i)
+        if self.z_short > 0:
+            np.maximum(vals, self.short_floor(z).astype(f32)[None, :], out=vals)
+        ll = vals.sum(axis=1, dtype=np.float64)
         return ll * self.temper if self.temper != 1.0 else ll
 
     def sample(self, poses: ArrayLike, angles: ArrayLike, rng: np.random.Generator,

@@ -223,10 +223,20 @@ def test_cli_runs_with_nav2_parameters_and_prints_the_mapping(sim_files, tmp_pat
     s = json.loads((tmp_path / "o" / "summary.json").read_text())["settings"]
     assert s["alphas"] == [0.2, 0.2, 0.2, 0.2] and s["beams"] == 60 and s["min_motion"] == [0.25, 0.2]
     assert s["max_range"] == 100.0 and s["sigma_hit"] == 0.2 and s["resample_threshold"] == 1.0
+    assert s["z_short"] == 0.0    # AMCL's likelihood field has no short-reading term
     assert s["kld"] == {"epsilon": 0.05, "delta": pytest.approx(norm.sf(0.99)), "n_min": 500, "n_max": 2000}
     assert s["amcl_params"]["dialect"] == "nav2" and "scan_topic" in s["amcl_params"]["ignored"]
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert summary["particles"] == 400
+
+
+def test_cli_keeps_an_explicit_z_short_beside_amcl_parameters(sim_files, tmp_path):
+    map_path, log_path = sim_files
+    status, out, err = run_cli("run", "--map", map_path, "--log", log_path, "--amcl-params", NAV2,
+                               "--particles", 400, "--z-short", 0.3, "--out", tmp_path / "o")
+    assert status == 0, err
+    assert "command-line options kept: --particles, --z-short" in out
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["settings"]["z_short"] == 0.3
 
 
 def test_help_shows_the_mapping_table(capsys):

@@ -6,6 +6,7 @@ import io as stdio
 import json
 
 import numpy as np
+import pytest
 
 from localize import cli, io
 from localize.demo import make_demo
@@ -34,15 +35,17 @@ def test_demo_data_is_deterministic_and_the_map_is_imperfect(tmp_path):
     assert np.allclose(t, a.times) and np.allclose(poses[:, :2], a.poses[:, :2], atol=1e-6)
 
 
-def test_demo_localizes_the_simulated_robot(tmp_path):
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_demo_localizes_the_simulated_robot(tmp_path, seed):
     out = tmp_path / "demo"
-    status, text, err = run_cli("demo", "--out", out, "--no-animate")
+    status, text, err = run_cli("demo", "--out", out, "--no-animate", "--seed", seed)
     assert status == 0, err
     for name in ("map.dat", "robot.log", "truth.tum", "trajectory.csv", "trajectory.tum", "summary.json"):
         assert (out / name).is_file(), name
     s = json.loads((out / "summary.json").read_text())
     d = s["demo"]
-    # seed 0, 150 scans, 5000 particles: found within 0.5 m early, and then tracked to about 0.2 m
+    # 150 scans, 'auto' particles (5,000 found the robot in only 5-6 of 10 seeds): found within 0.5 m early,
+    # then tracked to about 0.2 m
     assert d["convergence_step_truth"] is not None and d["convergence_step_truth"] < 60
     assert d["median_error_after_convergence_m"] < 0.35
     assert "against the true poses" in text and "evo_ape tum" in text

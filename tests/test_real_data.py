@@ -132,6 +132,20 @@ def test_freiburg_odometry_glitch_is_real(logs):
     assert m[:, 0].sum() > 0.5 and c[:, 0].sum() < -0.5
 
 
+def test_freiburg_odometry_never_reports_backing_up(logs):
+    """Chapter 9's explanation of Freiburg's failures: the odometry's speed has no sign, and the two start scans
+    that fail at every seed are the runs in which the robot backs up most often."""
+    log = logs["freiburg-079"]
+    m, c = log.motions(), relative(log.poses[:-1], log.poses[1:])
+    assert not np.any(m[:, 0] < -1e-3)                        # the odometry never drives backwards ...
+    backing = (c[:, 0] < -0.05) & (m[:, 0] >= 0)               # ... while the robot backs up by > 5 cm
+    assert 80 <= backing.sum() <= 150                          # "about a hundred of its steps"
+    b = (c[:, 0] < -0.02) & (m[:, 0] >= 0)
+    per_run = {s: int(b[s:s + 299].sum()) for s in _bench().start_scans(len(log), 300, 20)}
+    assert sorted(per_run, key=per_run.get)[-2:] == [709, 1182], per_run
+    assert (per_run[709], per_run[1182]) == (37, 50), per_run
+
+
 @pytest.mark.parametrize("name, n_scans, within", [("intel", 130, 100), ("freiburg-079", 240, 200)])
 def test_global_localization_converges_in_most_seeds(logs, built, name, n_scans, within):
     every = EVERY[name]
@@ -218,3 +232,25 @@ def test_benchmark_small_version(shared_data, capsys):
     for r in rows:
         cells = [c.strip() for c in r.strip("|").split("|")]
         assert cells[1] == "1" and cells[2].split("/")[1].startswith("1")
+
+
+def test_simulated_laser_reports_no_return_where_nothing_is_in_range():
+    """bench_global's Willow laser: a beam with nothing within max_range reads max_range, not a hit near it."""
+    from localize.maps import office
+    from localize.sensors import BeamModel
+
+    b = _bench()
+    g = office()
+    laser = BeamModel(g, 3.0, z_hit=0.8, z_short=0.1, z_max=0.05, z_rand=0.05, sigma_hit=0.1, method="exact")
+    poses = g.sample_free(200, np.random.default_rng(1))
+    angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)
+    expected = laser.expected(poses, angles)
+    far = expected >= laser.max_range
+    assert 0.2 < far.mean() < 0.9                          # both kinds of beam occur
+    plain = laser.sample(poses, angles, np.random.default_rng(2))
+    z = b._NoReturn(laser).sample(poses, angles, np.random.default_rng(2))
+    near_max = far & (plain > laser.max_range - 0.5) & (plain < laser.max_range)
+    assert near_max.sum() > 100                            # the plain model draws end points in mid-air ...
+    assert np.all(z[near_max] == laser.max_range)          # ... which the wrapped laser reports as no return
+    same = ~far | (plain < laser.max_range - 5 * laser.sigma_hit)
+    np.testing.assert_array_equal(z[same], plain[same])    # every other reading is drawn unchanged

@@ -191,6 +191,40 @@ def test_likelihood_field_point_probability():
     assert ll[0] > ll[1]
 
 
+def test_short_term_lifts_only_the_beams_that_score_below_a_likely_short_reading(grid):
+    plain = LikelihoodField(grid, MAXR, 0.9, 0.1, sigma_hit=0.1)
+    short = LikelihoodField(grid, MAXR, 0.9, 0.1, sigma_hit=0.1, z_short=0.2, lambda_short=0.5)
+    # the floor is PR's short density plus the random term: log(z_rand/max_range + z_short lambda e^(-lambda z))
+    assert short.short_floor(1.0) == pytest.approx(math.log(0.1 / MAXR + 0.2 * 0.5 * math.exp(-0.5)))
+    assert plain.short_floor([0.5, 3.0]) == pytest.approx([math.log(0.1 / MAXR)] * 2)
+    rng = np.random.default_rng(3)
+    poses = grid.sample_free(30, rng)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 25)
+    z = rng.uniform(0.1, MAXR + 1.0, 25)
+    fast = short.log_likelihood(poses, z, angles)
+    np.testing.assert_allclose(fast, short.log_likelihood_reference(poses, z, angles), rtol=1e-5, atol=1e-4)
+    # beam by beam: the floor replaces a score only where the score is lower, so no pose loses
+    per_beam = np.stack([plain.log_likelihood(poses, z[k:k + 1], angles[k:k + 1]) for k in range(25)], axis=1)
+    returned = z < MAXR
+    expect = np.where(returned, np.maximum(per_beam, short.short_floor(z)), 0.0).sum(axis=1)
+    np.testing.assert_allclose(fast, expect, rtol=1e-5, atol=1e-4)
+    assert np.all(fast >= plain.log_likelihood(poses, z, angles) - 1e-4)
+    # a short reading ending in the open, far from walls, is a likely unmapped obstacle; on a wall it is a hit
+    pose = [[6.0, 5.5, np.pi / 2]]                         # the wall at y = 6.4 is 0.9 m ahead
+    open_end = [0.4]                                       # ends 0.5 m short of it, in free space
+    assert short.log_likelihood(pose, open_end, [0.0])[0] > plain.log_likelihood(pose, open_end, [0.0])[0] + 1.0
+    assert short.log_likelihood(pose, [0.9], [0.0])[0] == pytest.approx(plain.log_likelihood(pose, [0.9], [0.0])[0])
+    assert "z_short=0.2" in repr(short) and "z_short" not in repr(plain)
+
+
+@pytest.mark.parametrize("kw, what", [({"z_short": -0.1}, "z_short"), ({"z_short": 1.5}, "z_short"),
+                                      ({"z_short": float("nan")}, "z_short"), ({"lambda_short": 0.0}, "lambda_short"),
+                                      ({"lambda_short": "fast"}, "lambda_short")])
+def test_short_term_rejects_bad_weights(grid, kw, what):
+    with pytest.raises((ValueError, TypeError), match=what):
+        LikelihoodField(grid, MAXR, **kw)
+
+
 # ---------------------------------------------- product versus sum of beams
 def test_product_of_beams_separates_poses_that_the_sum_hardly_does(beam):
     """Seed 001 summed per-beam densities; the principled rule multiplies them (adds logs)."""
