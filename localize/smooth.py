@@ -40,7 +40,12 @@ states (``searching`` / ``localized`` / ``lost``):
   place: on the scans next to the stretch where it alone is localized, as
   long as its estimate follows that place (no jump against the odometry), the
   winner's estimate is used and the state is not ``localized``;
-* only one localized: that one (**forward** or **backward**);
+* only one localized: that one (**forward** or **backward**), unless the
+  other pass's estimate (its cloud's mean, not localized) fits the scans of
+  the stretch better by the same paired test: then the lone pass is
+  *overruled* (it may have settled on a look-alike place, e.g. after a
+  restart), the better-fitting estimate is used and the state is not
+  ``localized``;
 * neither: **none**; the state stays honest (``searching`` before the first
   localized scan of the combined trajectory, ``lost`` after it); the
   estimate is the one that fits the scans better (over five neighbouring
@@ -187,6 +192,10 @@ class Smoothed(StateTrack):
     disagreements : list of dict
         One per stretch of ``disagree`` scans: first and last scan, the pass
         chosen, both passes' mean scan fit and the reason.
+    overruled : list of dict
+        One per stretch where only one pass is localized but the other
+        pass's estimate fits the scans clearly better: first and last scan,
+        the pass overruled, both mean scan fits. Those scans are not localized.
     agree_distance, agree_heading : float
         The agreement thresholds (metres, radians).
     from_backward : ndarray (T,) of bool
@@ -198,6 +207,7 @@ class Smoothed(StateTrack):
     forward: RunTrace
     backward: RunTrace
     disagreements: list = field(default_factory=list)
+    overruled: list = field(default_factory=list)
     agree_distance: float = 0.5
     agree_heading: float = float(np.radians(10.0))
     from_backward: NDArray[np.bool_] | None = None
@@ -219,6 +229,7 @@ class Smoothed(StateTrack):
             "forward_first_localized_scan": int(fl[0]) if fl.size else None,
             "backward_first_localized_scan": int(bl[0]) if bl.size else None,
             "disagreements": self.disagreements,
+            "overruled": self.overruled,
             "agree_distance_m": self.agree_distance,
             "agree_heading_deg": round(float(np.degrees(self.agree_heading)), 3),
             "meaning": ("passes per scan -- both: forward and backward pass localized and within agree_distance_m "
@@ -328,9 +339,7 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
                                                                                          else np.nan),
                        fit_backward=_round(np.mean(fb[ok]) if ok.any() else np.nan))
             if d.size >= 2:
-                se = float(np.std(d, ddof=1) / np.sqrt(d.size))
-                mean = float(np.mean(d))
-                z = mean / se if se > 0 else (np.inf * np.sign(mean) if mean else 0.0)
+                mean, z = _paired_z(d)
                 row["fit_z"] = _round(z, 2) if np.isfinite(z) else (99.0 if z > 0 else -99.0)
                 if abs(z) >= min_z and abs(mean) >= min_gain:
                     verdict = "backward" if mean > 0 else "forward"
@@ -366,6 +375,28 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
                 distrusted[alone] = True
                 row["distrusted_scans"] = [[int(x), int(y)] for x, y in _intervals(np.isin(np.arange(t), alone))]
         disagreements.append(row)
+
+    overruled = []
+    if fit is not None:
+        # a pass localized alone where the other pass's estimate, not localized, fits the scans clearly better
+        # (by the same paired test): the lone pass may have settled on a look-alike place, e.g. after a restart,
+        # while the other one's cloud already leans to the right place. No claim there; the better estimate.
+        for who, other in (("forward", "backward"), ("backward", "forward")):
+            mine_p, other_p = (pf, pb) if who == "forward" else (pb, pf)
+            for a, b in _intervals((passes == who) & ~distrusted):
+                scans = np.arange(a, b + 1)
+                fm, fo = fit(mine_p[scans], scans), fit(other_p[scans], scans)
+                ok = np.isfinite(fm) & np.isfinite(fo)
+                d = fo[ok] - fm[ok]
+                if d.size < 2:
+                    continue
+                mean, z = _paired_z(d)
+                if mean >= min_gain and z >= min_z:
+                    distrusted[scans] = True
+                    source[scans] = other
+                    overruled.append({"scans": [a, b], "pass": who, f"fit_{who}": _round(np.mean(fm[ok])),
+                                      f"fit_{other}": _round(np.mean(fo[ok])),
+                                      "fit_z": _round(z, 2) if np.isfinite(z) else 99.0})
 
     poses = np.array(pf, dtype=float, copy=True)
     stds = np.array(forward.stds, dtype=float, copy=True)
@@ -413,7 +444,8 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
     seen = np.cumsum(loc) > 0
     state[~loc & seen] = "lost"
     return Smoothed(poses=poses, stds=stds, spread=spread, state=state, passes=passes, source=source,
-                    forward=forward, backward=backward, disagreements=disagreements, agree_distance=float(d_max),
+                    forward=forward, backward=backward, disagreements=disagreements, overruled=overruled,
+                    agree_distance=float(d_max),
                     agree_heading=float(a_max), from_backward=take_b & ~agree)
 
 
@@ -437,6 +469,14 @@ def _jumps(p: NDArray, odo: NDArray, tol: float) -> NDArray[np.bool_]:
         with np.errstate(invalid="ignore"):
             jump[1:] = ~(np.hypot(*(p[1:, :2] - pred[:, :2]).T) <= tol)
     return jump
+
+
+def _paired_z(d: NDArray) -> tuple[float, float]:
+    """Mean of the paired differences ``d`` (at least two) and its z-score (mean over standard error; +-inf when
+    the differences are all equal and not 0, 0 when all are 0)."""
+    se = float(np.std(d, ddof=1) / np.sqrt(d.size))
+    mean = float(np.mean(d))
+    return mean, (mean / se if se > 0 else (np.inf * np.sign(mean) if mean else 0.0))
 
 
 def _run_length(mask: NDArray[np.bool_]) -> int:
@@ -588,6 +628,12 @@ def headline(summary: dict) -> str:
         text = ", ".join(f"{d['scans'][0]}-{d['scans'][1]} ({_verdict(d)})" for d in shown)
         more = len(summary["disagreements"]) - len(shown)
         parts.append(f"they disagree on scans {text}" + (f" and {more} more stretches" if more > 0 else ""))
+    over = summary.get("overruled") or []
+    if over:
+        text = ", ".join(f"{o['scans'][0]}-{o['scans'][1]} ({o['pass']})" for o in over[:3])
+        parts.append(f"a pass localized alone is overruled on scans {text}" +
+                     (f" and {len(over) - 3} more stretches" if len(over) > 3 else "") +
+                     ": the other pass's estimate fits the scans better (not localized there)")
     if p.get("none"):
         parts.append(f"{p['none']} scans localized by neither pass")
     return "; ".join(parts)
