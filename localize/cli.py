@@ -434,9 +434,9 @@ def localize_log(
 
         kld = KLDSampling(epsilon=DEFAULTS["kld"], n_min=min(DEFAULTS["min_particles"], int(n_particles)),
                           n_max=int(n_particles), chunked=True)
-    if sensor == "likelihood" and min_range:
-        params.setdefault("min_range", float(min_range))
     if sensor == "likelihood":
+        if min_range:
+            params.setdefault("min_range", float(min_range))
         params.setdefault("z_short", z_short)
     model = make_sensor(sensor, grid, mr, log.sensor_offset, temper=temper, **params)
     ranges = np.minimum(log.ranges, mr)

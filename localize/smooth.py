@@ -340,7 +340,7 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
                        fit_backward=_round(np.mean(fb[ok]) if ok.any() else np.nan))
             if d.size >= 2:
                 mean, z = _paired_z(d)
-                row["fit_z"] = _round(z, 2) if np.isfinite(z) else (99.0 if z > 0 else -99.0)
+                row["fit_z"] = _z_shown(z)
                 if abs(z) >= min_z and abs(mean) >= min_gain:
                     verdict = "backward" if mean > 0 else "forward"
         if verdict is not None:
@@ -396,7 +396,7 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
                     source[scans] = other
                     overruled.append({"scans": [a, b], "pass": who, f"fit_{who}": _round(np.mean(fm[ok])),
                                       f"fit_{other}": _round(np.mean(fo[ok])),
-                                      "fit_z": _round(z, 2) if np.isfinite(z) else 99.0})
+                                      "fit_z": _z_shown(z)})
 
     poses = np.array(pf, dtype=float, copy=True)
     stds = np.array(forward.stds, dtype=float, copy=True)
@@ -477,6 +477,11 @@ def _paired_z(d: NDArray) -> tuple[float, float]:
     se = float(np.std(d, ddof=1) / np.sqrt(d.size))
     mean = float(np.mean(d))
     return mean, (mean / se if se > 0 else (np.inf * np.sign(mean) if mean else 0.0))
+
+
+def _z_shown(z: float) -> float:
+    """A z-score as summary.json shows it: 2 decimals, +-99 for an infinite one."""
+    return _round(z, 2) if np.isfinite(z) else (99.0 if z > 0 else -99.0)
 
 
 def _run_length(mask: NDArray[np.bool_]) -> int:
