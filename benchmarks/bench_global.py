@@ -320,8 +320,13 @@ def main(argv=None) -> int:
                  "the table of the defaults")
     opts = {}
     for kv in args.set:
+        if "=" not in kv:
+            ap.error(f"--set expects NAME=VALUE (a localize_log keyword); got {kv!r}")
         k, v = kv.split("=", 1)
-        opts[k] = json.loads(v)
+        try:
+            opts[k] = json.loads(v)          # numbers, lists, true/false ...
+        except json.JSONDecodeError:
+            opts[k] = v                      # ... and words as they are: --set odometry_sign=trust
     root = data_root()
     names = [n for n in args.logs if (root / ("willow" if n == "willow" else "carmen")).exists()]
     t0 = time.perf_counter()

@@ -52,7 +52,7 @@ _LAZY_NAMES = {
 _SUBMODULES = (
     "beam_learning", "check", "cli", "compare", "diagnostics", "discrete", "ekf", "geometry", "grid", "gridloc",
     "histogram", "io", "kld", "mapping", "maps", "mcl", "metrics", "motion", "multiscale", "plot", "raycast",
-    "resample", "sensors", "sim", "smooth", "widgets",
+    "resample", "scanmatch", "sensors", "sim", "smooth", "widgets",
 )
 
 __all__ = ["OccupancyGrid", "wrap_angle", "__version__", *_LAZY_NAMES]

@@ -123,6 +123,8 @@ DEFAULTS: dict[str, Any] = {
     "unknown_penalty": 0.0,
     "expand": (0.0, 0.0),
     "unknown_beams": "skip",
+    "odometry_sign": "auto",
+    "occupied_penalty": 5.0,
 }
 
 
@@ -243,6 +245,7 @@ class RunResult:
 
     times: NDArray[np.float64]
     trace: Any
+    odometry_check: Any = None
 
     @property
     def estimates(self) -> NDArray[np.float64]:
@@ -266,6 +269,50 @@ class RunResult:
     @property
     def seconds_per_scan(self) -> float:
         return self.seconds / max(len(self.times), 1)
+
+
+#: ``--odometry-sign``: when the scans may reverse odometry steps (see :func:`check_log_odometry`).
+ODOMETRY_SIGN = ("auto", "check", "trust")
+
+
+def check_log_odometry(log, mode: str = DEFAULTS["odometry_sign"], min_range: float = DEFAULTS["min_range"]):
+    """``(log, check)``: the log with the odometry steps the scans say were driven backwards reversed.
+
+    ``mode`` "check" compares every step of the odometry with consecutive scans
+    (:func:`localize.scanmatch.check_odometry_sign`); "auto" (the default of
+    ``localize run``) does so only for odometry that never reports reversing
+    (:func:`localize.scanmatch.reports_reversing`): a speed without a sign,
+    whose backing-up manoeuvres read as driving forwards; "trust" never.
+    ``check`` is the :class:`~localize.scanmatch.OdometrySignCheck`, or None
+    when nothing was checked. A log whose steps all keep their sign is
+    returned as it is.
+
+    Examples
+    --------
+    >>> from localize.io import LaserLog
+    >>> wall = np.c_[np.full(41, 2.0), np.linspace(-1, 1, 41)]            # a wall 2 m ahead
+    >>> angles = np.arctan2(wall[:, 1], wall[:, 0])
+    >>> log = LaserLog(times=[0.0, 1.0], odometry=[[0, 0, 0], [0.4, 0, 0]], angles=angles, max_range=30.0,
+    ...                ranges=[np.hypot(*wall.T), np.hypot(wall[:, 0] + 0.4, wall[:, 1])])   # backs up 0.4 m
+    >>> fixed, chk = check_log_odometry(log)
+    >>> chk.reversed.tolist(), fixed.odometry[-1].round(3).tolist()
+    ([0], [-0.4, 0.0, 0.0])
+    >>> check_log_odometry(log, "trust")[1] is None
+    True
+    """
+    from dataclasses import replace
+
+    from .scanmatch import check_odometry_sign, reports_reversing
+
+    if mode not in ODOMETRY_SIGN:
+        raise ValueError(f"odometry_sign must be one of {', '.join(ODOMETRY_SIGN)}; got {mode!r}")
+    if mode == "trust" or (mode == "auto" and reports_reversing(log.odometry)):
+        return log, None
+    chk = check_odometry_sign(log.ranges, log.angles, log.odometry, log.max_range, min_range=min_range or 0.0,
+                              sensor_offset=log.sensor_offset)
+    if chk.reversed.size:
+        log = replace(log, odometry=chk.odometry, meta={**log.meta, "odometry_reversed_by_scans": chk.summary()})
+    return log, chk
 
 
 def localize_log(
@@ -302,6 +349,8 @@ def localize_log(
     expand: tuple[float, float] = DEFAULTS["expand"],
     unknown_beams: str = DEFAULTS["unknown_beams"],
     z_short: float = DEFAULTS["z_short"],
+    odometry_sign: str = DEFAULTS["odometry_sign"],
+    occupied_penalty: float = DEFAULTS["occupied_penalty"],
 ) -> RunResult:
     """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` and return the per-scan estimates.
 
@@ -420,6 +469,7 @@ def localize_log(
     if unknown_beams not in ("skip", "score"):
         raise ValueError(f"unknown_beams must be 'skip' or 'score'; got {unknown_beams!r}")
     n_particles = resolve_particles(n_particles, grid)
+    log, sign_check = check_log_odometry(log, odometry_sign, min_range=min_range)
     if init not in ("global", "reference"):
         raise ValueError(f"init must be 'global' or 'reference'; got {init!r}")
     if beams is not None and beams < log.n_beams:
@@ -445,7 +495,8 @@ def localize_log(
         motion = RobustOdometry(motion, outlier=odometry_outliers)
     opts: dict[str, Any] = dict(resample_threshold=resample_threshold, injection=injection,
                                 free_space_only=free_space_only, augmented=augmented, kld=kld,
-                                unknown_allowed=unknown_allowed, unknown_penalty=unknown_penalty, min_ess=min_ess)
+                                unknown_allowed=unknown_allowed, unknown_penalty=unknown_penalty, min_ess=min_ess,
+                                occupied_penalty=occupied_penalty)
     if init == "global":
         f = MCL.uniform(grid, n_particles, motion, model, rng=rng, **opts)
     else:
@@ -463,7 +514,7 @@ def localize_log(
                     snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
                     restart_after=restart_after, expand=tuple(expand), skip_unknown_beams=unknown_beams == "skip",
                     callback=None if progress is None else progress.update_to)
-    return RunResult(times=np.asarray(log.times), trace=tr)
+    return RunResult(times=np.asarray(log.times), trace=tr, odometry_check=sign_check)
 
 
 # ============================================================================ outputs
@@ -541,6 +592,12 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
         out["state"]["meaning"] = ("searching: no single, well-fitting hypothesis yet; localized: one cluster holds "
                                    "most of the weight, is tight, and the scans fit the map there; lost: it was "
                                    "localized and no longer is (see localize.mcl.StateRules)")
+    chk = getattr(res, "odometry_check", None)
+    if chk is not None:
+        out["odometry_sign"] = {**chk.summary(), "meaning": (
+            "odometry steps (step k: from scan k to scan k+1 of the scans used) driven backwards because the two "
+            "scans fit the reversed step clearly better; checked because the odometry never reports reversing "
+            "or --odometry-sign check (see localize.scanmatch.check_odometry_sign)")}
     if reference is not None:
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
         cs = converged_at(err, threshold, hold)
@@ -704,6 +761,16 @@ _fraction = _number_type(float, "a fraction in [0, 1)", lambda v: 0 <= v < 1, "f
 _weight = _number_type(float, "a weight in [0, 1]", lambda v: 0 <= v <= 1, "weight")
 
 
+def _penalty(s: str) -> float:
+    """``--occupied-penalty``: a positive number of nats, or ``inf``."""
+    if s.strip().lower() in ("inf", "infinity"):
+        return float("inf")
+    try:
+        return _positive_float(s)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected a positive number of nats or 'inf'; got {s}") from None
+
+
 def _shown(value: Any) -> str:
     """A default as ``--help`` shows it: numbers by ``:g``, the values of a tuple separated by spaces."""
     if isinstance(value, (tuple, list)):
@@ -805,23 +872,40 @@ FILTER_OPTIONS: tuple[FilterOption, ...] = (
         while the state is 'lost', replace the fraction F of the particles by random ones at each
         resampling, so that the filter searches again (default {default}). Example: --recovery 0"""),
     FilterOption("--restart-after", _nonneg_int, metavar="K", help="""
-        start global localization again (all --particles re-drawn over the map) when the cloud has agreed on
-        one place but the scans have not fitted the map there for K updates in a row: it is confidently
-        wrong (default {default}; 0 never). Example: --restart-after 5"""),
+        start global localization again (all --particles drawn over the map beside the cloud, each half of the
+        weight) when the cloud has agreed on one place but the scans have not fitted the map there for K
+        updates in a row: it is confidently wrong. Before the filter is first localized, a cloud gathered
+        more loosely (within 2 m) counts too, and so do updates at which the map cannot judge the scans at all
+        (their beams end in its unknown cells): a cloud stuck on such a place would otherwise search there
+        for ever (default {default}; 0 never). Example: --restart-after 5"""),
     FilterOption("--min-ess", _nonneg_float, metavar="F", help="""
         adaptive tempering: no single scan may leave fewer than F*N effective particles, so the first scans
         cannot collapse the cloud onto a look-alike place (default {default}; 0 off). Example: --min-ess 0.1"""),
     FilterOption("--expand", _nonneg_float, 2, ("M", "RAD"), help="""
         expansion resetting: when the cloud agrees on a place but the scan just used does not fit the map
         there, spread every particle by Gaussian noise of M metres and RAD radians, so that the next scans can
-        find a robot that the odometry lost (wheel slip, a bump, odometry that misses the robot backing up --
-        the Freiburg 079 log's does) (default {default}; 0 0 never). Example: --expand 0 0"""),
+        find a robot that the odometry lost (wheel slip, a bump) (default {default}; 0 0 never). Example:
+        --expand 0.2 0.1"""),
     FilterOption("--unknown-beams", choices=("skip", "score"), help="""
         'skip': once the cloud agrees on one place, the beams whose end point there lies in a cell the map
         leaves unknown are left out of the update, and a scan with no other beam is not used; 'score': every
         beam is scored, an end point in an unknown cell with one neutral score (default {default}). The map
         cannot say whether such a beam fits, and scored it pulls the cloud of a robot that drives through a
         region the map left unknown towards that region's known walls. Example: --unknown-beams score"""),
+    FilterOption("--occupied-penalty", _penalty, metavar="NATS", help="""
+        a particle standing in one of the map's obstacles loses NATS of log-likelihood at each update (default
+        {default}: a pose in a wall is e^-5, about 150 times, less likely than one in free space with the same
+        scan fit); 'inf' gives it zero weight. Finite, a robot that drives through an obstacle the map is wrong
+        about (a door drawn shut, furniture since moved, walls drawn too thick) keeps its cloud: every particle
+        in it pays the same, and the scans decide. Outside the map a particle has zero weight either way.
+        Example: --occupied-penalty inf"""),
+    FilterOption("--odometry-sign", choices=ODOMETRY_SIGN, help="""
+        'check': compare every odometry step of at least 5 cm with the two scans around it, and drive
+        backwards the steps whose reverse fits the scans clearly better (the second scan's end points, placed
+        with the step reversed, lie within 70 percent of the distance they lie at with the step as logged); 'auto'
+        (default {default}): check only odometry that never reports reversing, a speed without a sign that
+        records every backing-up as driving forwards (the Freiburg 079 log's does); 'trust': never.
+        summary.json lists the steps reversed. Example: --odometry-sign trust"""),
 )
 
 
@@ -1025,7 +1109,8 @@ def run_kwargs(args: argparse.Namespace, grid: OccupancyGrid | None = None) -> d
         min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
         restart_after=max(int(args.restart_after), 0), min_ess=args.min_ess,
         unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"], expand=tuple(args.expand),
-        unknown_beams=args.unknown_beams, z_short=args.z_short,
+        unknown_beams=args.unknown_beams, z_short=args.z_short, occupied_penalty=args.occupied_penalty,
+        odometry_sign=args.odometry_sign,
     )
 
 
@@ -1271,6 +1356,10 @@ def _run(args, out: TextIO, err: TextIO, dest: RunOutput, extras: dict) -> int:
         if getattr(args, "smooth", False):
             from .smooth import headline as smooth_headline
             lines.append(smooth_headline(summary["smooth"]))
+        if summary.get("odometry_sign", {}).get("steps_reversed"):
+            o = summary["odometry_sign"]
+            lines.append(f"odometry: {o['steps_reversed']} of {o['steps_checked']} steps checked against the scans "
+                         "were driven backwards (the odometry reports no reversing; --odometry-sign trust keeps it)")
         if ref is not None and summary.get("median_error_while_localized_m") is not None:
             lines.append(f"against the log's reference poses, while localized: median error "
                          f"{summary['median_error_while_localized_m']} m, 90% {summary['p90_error_while_localized_m']} m"

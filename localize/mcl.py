@@ -468,6 +468,18 @@ class MCL:
         With ``free_space_only``: let particles stand in *unknown* cells too
         (only known obstacles and the outside of the map are forbidden). Real
         maps leave parts of a building unknown, and the robot drives there.
+    occupied_penalty : float
+        With ``free_space_only``: the log-likelihood a particle in a known
+        obstacle loses at each update (> 0 nats). ``np.inf`` (the default)
+        gives it zero weight. A finite penalty keeps the cloud of a robot that
+        drives through an obstacle the map is wrong about (a door drawn shut,
+        furniture since moved, a wall drawn too thick): when every particle is
+        in it, every particle pays the same and the scans decide. Outside the
+        grid the weight is zero either way. The attribute ``soft_obstacles``
+        (True) switches the penalty on and off: :func:`run_filter` applies it
+        only while the cloud agrees on one place, and gives particles in
+        obstacles zero weight while it searches (a hypothesis in a wall is
+        then just a wrong one).
     unknown_penalty : float
         With ``unknown_allowed``: subtract this from the log-likelihood of
         particles in unknown cells at each update (>= 0). A soft prior: when
@@ -528,6 +540,7 @@ class MCL:
         unknown_allowed: bool = False,
         unknown_penalty: float = 0.0,
         min_ess: float = 0.0,
+        occupied_penalty: float = np.inf,
     ) -> None:
         self.rng = check_rng(rng)
         p = check_poses(particles, "particles")  # (N, 3); warns on a (3, 3) that looks transposed
@@ -606,6 +619,13 @@ class MCL:
             self._free = np.ascontiguousarray(allowed)
             if self.unknown_penalty:
                 self._unknown = np.ascontiguousarray(grid.unknown)
+        op = float(occupied_penalty)
+        if not op > 0:
+            raise ValueError(f"occupied_penalty must be > 0 nats (np.inf: zero weight); got {occupied_penalty!r}")
+        self.occupied_penalty = op
+        self.soft_obstacles = True      # run_filter: only once the cloud agrees on one place
+        if self.free_space_only and np.isfinite(op):
+            self._occupied = np.ascontiguousarray(grid.occupied)
         self.status = MCLStatus(n_particles=n, n_eff=self.n_eff)
 
     # ------------------------------------------------------------ constructors
@@ -740,7 +760,12 @@ class MCL:
         if n_bad:
             ll = np.where(bad, -np.inf, ll)
         if self.free_space_only:
-            ll = np.where(self._in_free_space(self.particles), ll, -np.inf)
+            allowed = self._in_free_space(self.particles)
+            if np.isfinite(self.occupied_penalty) and self.soft_obstacles:   # in a known obstacle: a finite penalty
+                ll = np.where(allowed, ll, np.where(self._in_free_space(self.particles, self._occupied),
+                                                    ll - self.occupied_penalty, -np.inf))
+            else:
+                ll = np.where(allowed, ll, -np.inf)
             if self.unknown_penalty:
                 ll = ll - self.unknown_penalty * self._in_free_space(self.particles, self._unknown)
         st.beta = 1.0
@@ -1454,7 +1479,14 @@ def run_filter(
         the start (``kld.n_max`` with KLD-sampling) are added beside the
         current cloud, each half of the weight: if the old place was right it
         keeps winning, if not the new particles find the robot. ``events``
-        says so.
+        says so. While the state is still ``searching`` (never localized since
+        the start or the last restart), a cloud *gathered*
+        on one place (best cluster share within the rules, spread within four
+        times ``max_spread``) counts as well, and so does an update whose fit
+        the map cannot judge (too few beams end on known cells): a cloud that
+        collapsed onto a place the map knows nothing about (a wrong room
+        whose beams all end in unknown cells scores as well as the right
+        one) would otherwise search there to the end of the log.
     expand : (metres, radians)
         Expansion resetting (Ueda et al. 2004): when the cloud has agreed on
         one place but the scan just used does not fit the map there (its fit
@@ -1540,6 +1572,7 @@ def run_filter(
 
         caster = RayCaster(grid, hi_r if np.isfinite(hi_r) else 1e3, method="march")
         free = ~grid.occupied         # "on the map": inside the grid and not in a known obstacle
+        inside_grid = np.ones(grid.shape, dtype=bool)
     out = {name: np.zeros((t, 3)) for name in ("poses", "means", "stds")}
     spread, best, n_eff, p_inj, fit, on_map = (np.full(t, np.nan) for _ in range(6))
     n_p, n_inj, n_valid = (np.zeros(t, dtype=np.int64) for _ in range(3))
@@ -1554,6 +1587,8 @@ def run_filter(
     n_expanded = 0
     last_odom: NDArray | None = None
     agreed_before = False      # the cloud agreed on one place at the last step (for skip_unknown_beams)
+    unjudged = 0               # updates of the current poor run whose fit the map could not judge
+    soft_penalty = bool(np.isfinite(getattr(mcl, "occupied_penalty", np.inf)))   # ... and for occupied_penalty
     n_skipped = n_blind = 0
     t0 = _now()
     for k in range(t):
@@ -1591,6 +1626,8 @@ def run_filter(
                     do_update = False
                     n_blind += 1
         if do_update:
+            if soft_penalty:
+                mcl.soft_obstacles = agreed_before
             mcl.update(*z)
             evals += int(n_p[k]) * (int(np.size(z[1])) if _is_scan(z) else 1)
             last_odom = where
@@ -1613,12 +1650,24 @@ def run_filter(
         if do_update and grid is not None and n_valid[k] > 0 and _is_scan(z):
             fit[k] = _scan_fit(caster, pose, offset, ranges[valid], angles[valid], fit_d, rules.min_beams)
         off_map = grid is not None and on_map[k] == 0.0
+        if off_map and soft_penalty and mcl.soft_obstacles:
+            # a cloud in an obstacle the map may be wrong about is not off the map; outside the grid it is
+            off_map = _free_share(grid, inside_grid, mcl.particles, mcl.weights) == 0.0
         agreed = e.best_weight >= rules.min_share and e.spread <= rules.max_spread
         agreed_before = agreed
+        # a cloud gathered on one place (if less tightly than "agreed") while the filter searches, where the map
+        # cannot judge the scans at all (their beams end in its unknown cells): that counts as not fitting
+        gathered = cur == "searching" and e.best_weight >= rules.min_share and e.spread <= 4 * rules.max_spread
         if do_update and np.isfinite(fit[k]):
             recent = (recent + [float(fit[k])])[-int(rules.fit_window):]
             fit_s = float(np.mean(recent))
-            poor = poor + 1 if (agreed and fit_s < rules.restart_fit * fit_expected) else 0
+            wrong = fit_s < rules.restart_fit * fit_expected
+            if agreed or not (gathered and wrong):   # a loosely gathered cloud's poor fit alone does not count
+                poor = poor + 1 if (agreed and wrong) else 0
+                unjudged = 0 if poor == 0 else unjudged
+        elif do_update and gathered and grid is not None and _is_scan(z) and n_valid[k] >= rules.min_beams:
+            poor += 1
+            unjudged += 1
         if (ex_xy > 0 or ex_th > 0) and do_update and agreed and np.isfinite(fit[k]) and (
                 fit[k] < rules.restart_fit * fit_expected):
             noise = mcl.rng.normal(0.0, 1.0, mcl.particles.shape) * np.array([ex_xy, ex_xy, ex_th])
@@ -1632,10 +1681,13 @@ def run_filter(
             mcl.particles = np.vstack([mcl.particles, fresh])
             mcl.log_weights = np.concatenate([mcl.log_weights + np.log(0.5),
                                               np.full(n_restart, np.log(0.5 / n_restart))])
-            events.append((k, f"the cloud agreed on a place where the scans have not fitted the map for {poor} "
-                              f"updates: {n_restart} particles drawn over the map beside it (global "
-                              "localization again)"))
+            where = ("gathered on a place where the map could not judge the scans (their beams end in its "
+                     "unknown cells) or they did not fit it" if unjudged else
+                     "agreed on a place where the scans have not fitted the map")
+            events.append((k, f"the cloud {where} for {poor} updates: {n_restart} particles drawn over the map "
+                              "beside it (global localization again)"))
             poor = 0
+            unjudged = 0
             good = 0
             agreed_before = False
             recent, fit_s = [], float("nan")
@@ -1691,6 +1743,8 @@ def run_filter(
         events.append((t - 1, f"{n_skipped} beams whose end point at the agreed place lies in the map's unknown cells "
                               f"were left out of the updates" + (f"; {n_blind} scan{'s' * (n_blind != 1)} had no "
                                                                  "other valid beam and were not used" if n_blind else "")))
+    if soft_penalty:
+        mcl.soft_obstacles = True
     return RunTrace(poses=out["poses"], means=out["means"], stds=out["stds"], spread=spread, best_weight=best,
                     n_eff=n_eff, n_particles=n_p, n_injected=n_inj, p_inject=p_inj, updated=updated,
                     resampled=resampled, degenerate=degen, n_valid=n_valid, fit=fit, on_map=on_map, state=state,

@@ -78,7 +78,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._checks import check_count, check_nonnegative, check_positive
-from .cli import RunResult, localize_log
+from .cli import DEFAULTS, RunResult, check_log_odometry, localize_log
 from .geometry import angle_diff, compose, relative, wrap_angle
 from .grid import OccupancyGrid
 from .mcl import RunTrace, StateTrack, _intervals, _now, _scan_fit
@@ -586,6 +586,11 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
     n = len(log)
     if progress is not None and hasattr(progress, "total"):
         progress.total = 2 * n
+    # the odometry's signs are checked once, on the log as recorded (played backwards, every step of an
+    # odometry without a sign reads as reversing); both passes then trust the corrected log
+    log, sign_check = check_log_odometry(log, kwargs.pop("odometry_sign", DEFAULTS["odometry_sign"]),
+                                         min_range=kwargs.get("min_range", DEFAULTS["min_range"]))
+    kwargs["odometry_sign"] = "trust"
     fw = localize_log(grid, log, rng=rng, progress=progress, **kwargs)
     back_kw = {**kwargs, "snapshot_every": 0}
     bw = localize_log(grid, reverse_log(log), rng=rng,
@@ -600,7 +605,7 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
     s = combine(fw.trace, reverse_trace(bw.trace), fit, odometry=log.odometry, agree_distance=agree_distance,
                 agree_heading=agree_heading)
     tr = smoothed_trace(s)
-    res = SmoothResult(times=fw.times, trace=tr, smooth=s, columns={"passes": s.passes, "source": s.source},
+    res = SmoothResult(times=fw.times, trace=tr, odometry_check=sign_check, smooth=s, columns={"passes": s.passes, "source": s.source},
                        forward=fw, backward=bw, seconds_combine=_now() - t0)
     return res
 

@@ -190,6 +190,66 @@ def test_free_space_only_zeroes_particles_in_walls():
     np.testing.assert_allclose(f.weights, [0.5, 0, 0, 0.5])
 
 
+def test_occupied_penalty_is_a_finite_price_for_standing_in_an_obstacle():
+    """--occupied-penalty: a particle in a known obstacle loses that many nats; outside the grid it has no weight."""
+    g = office()
+    p = np.array([[0.5, 0.5, 0.0], [0.05, 0.05, 0.0], [-5.0, 3.0, 0.0], [10.0, 5.5, 0.0]])   # free, wall, off, free
+    f = MCL(p, shift, ConstSensor(0.0), rng=np.random.default_rng(3), grid=g, free_space_only=True,
+            occupied_penalty=5.0)
+    f.update()
+    w = f.weights
+    assert w[2] == 0.0 and w[0] == pytest.approx(w[3])
+    assert w[1] / w[0] == pytest.approx(np.exp(-5.0))
+    # a whole cloud in an obstacle the map is wrong about (a door drawn shut) keeps its weights: the scans decide
+    door = np.tile([0.05, 0.05, 0.0], (50, 1)) + np.c_[np.linspace(0, 0.04, 50), np.zeros((50, 2))]
+
+    class Ramp:                                       # a scan that prefers the particles further right
+        def log_likelihood(self, poses, *z):
+            return poses[:, 0] * 10.0
+
+    soft = MCL(door, shift, Ramp(), rng=np.random.default_rng(0), grid=g, free_space_only=True, occupied_penalty=5.0)
+    soft.update()
+    assert not soft.status.degenerate
+    assert soft.weights[-1] / soft.weights[0] == pytest.approx(np.exp(0.4))
+    hard = MCL(door, shift, Ramp(), rng=np.random.default_rng(0), grid=g, free_space_only=True)
+    assert not hard._in_free_space(door).any()        # all 50 stand in the office's corner wall
+    hard.update()
+    assert hard.status.degenerate                     # np.inf (the MCL default): every particle has zero weight
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="occupied_penalty must be > 0"):
+            MCL(p, shift, ConstSensor(0.0), rng=np.random.default_rng(0), grid=g, free_space_only=True,
+                occupied_penalty=bad)
+
+
+def test_run_filter_keeps_a_cloud_that_walks_into_an_obstacle_with_a_finite_penalty():
+    """Not "off the map": an agreed cloud is neither re-drawn nor called lost for standing in a mapped obstacle
+    (a door drawn shut); while the filter searches, a particle in an obstacle still has zero weight."""
+    from localize.mcl import OdometryMotion, run_filter
+
+    g = office()
+    occ = g.occupied
+    n = int(round(1.0 / g.resolution))
+    i, j = next((i, j) for i, j in np.argwhere(occ[:, 1:] & ~occ[:, :-1])
+                if j > n and g.free[i, j - n:j + 1].all())                 # 1 m of free floor, then an obstacle
+    wall = g.origin + (np.array([j + 1, i]) + 0.5) * g.resolution
+    start = wall - [1.0, 0.0]
+    odo = np.zeros((5, 3))
+    odo[3:, 0] = 1.0                                                      # the robot steps 1 m right, into it
+    where = [start, start, start, wall, wall]
+    for penalty, redrawn in ((5.0, False), (np.inf, True)):
+        f = MCL.gaussian([*start, 0.0], (0.01, 0.01, 0.001), 200, OdometryMotion((0.0,) * 4), XYSensor(0.1),
+                         rng=np.random.default_rng(0), grid=g, free_space_only=True, occupied_penalty=penalty)
+        tr = run_filter(f, 5, lambda k: (odo[k - 1], odo[k]), lambda k: (where[k],), grid=g, min_motion=(0.0, 0.0))
+        assert any("re-drawn" in t for k, t in tr.events) is redrawn, tr.events
+        assert (np.abs(tr.poses[-1, :2] - wall).max() < 0.05) is not redrawn, tr.poses[-1]
+        assert f.soft_obstacles                                           # left as it was found
+    # searching, the same cloud started in the obstacle has zero weight there: it is re-drawn
+    f = MCL.gaussian([*wall, 0.0], (0.01, 0.01, 0.001), 200, OdometryMotion((0.0,) * 4), XYSensor(0.1),
+                     rng=np.random.default_rng(0), grid=g, free_space_only=True, occupied_penalty=5.0)
+    tr = run_filter(f, 2, lambda k: None, lambda k: (wall,), grid=g, min_motion=(0.0, 0.0))
+    assert tr.degenerate[0]
+
+
 # ----------------------------------------------------------------- resampling policy
 def test_resampling_threshold_policy():
     f = make(1000, resample_threshold=0.0)

@@ -146,6 +146,27 @@ def test_freiburg_odometry_never_reports_backing_up(logs):
     assert (per_run[709], per_run[1182]) == (37, 50), per_run
 
 
+@pytest.mark.parametrize("name", list(LOGS))
+def test_the_scans_reverse_only_steps_in_which_the_robot_backed_up(shared_data, name):
+    """--odometry-sign: on Freiburg (unsigned odometry) the scans reverse about 80 steps, every one of them a step
+    in which the corrected poses move backwards; on the logs whose odometry has a sign, checked anyway, none."""
+    from localize.scanmatch import check_odometry_sign, reports_reversing
+
+    log = io.read_log(carmen(shared_data, name))
+    chk = check_odometry_sign(log.ranges, log.angles, log.odometry, log.max_range, sensor_offset=log.sensor_offset)
+    c = relative(log.poses[:-1], log.poses[1:])
+    assert chk.checked > 0.75 * np.sum(np.hypot(*log.motions()[:, :2].T) >= 0.05)
+    if name == "freiburg-079":
+        assert not reports_reversing(log.odometry)
+        assert (chk.reversed.size, chk.checked) == (77, 3631), (chk.reversed.size, chk.checked)   # chapter 9
+        assert np.all(c[chk.reversed, 0] < 0)                             # not one wrong reversal
+        backing = (c[:, 0] < -0.05) & (np.hypot(*log.motions()[:, :2].T) >= 0.05)
+        assert np.isin(np.flatnonzero(backing), chk.reversed).mean() > 0.9  # and nearly every clear one found
+    else:
+        assert reports_reversing(log.odometry)
+        assert chk.reversed.size == 0
+
+
 @pytest.mark.parametrize("name, n_scans, within", [("intel", 130, 100), ("freiburg-079", 240, 200)])
 def test_global_localization_converges_in_most_seeds(logs, built, name, n_scans, within):
     every = EVERY[name]

@@ -213,7 +213,7 @@ def test_smoothing_fixes_a_forward_pass_localized_in_the_wrong_place(seed):
     "localized"; the backward pass is right. The scan fit gives the stretch to the backward pass, and no smoothed
     scan claims a wrong place. In seed 4 the forward pass, lost, re-localizes at a look-alike place for the last
     scans, which the backward pass (its own start) has not localized: the backward estimate fits them better, so
-    the forward pass is overruled there. Of seeds 0-27 the forward pass fails so in 2, 4, 5 and 22; in 2 both passes
+    the forward pass is overruled there. (Measured with the defaults before --odometry-sign and --occupied-penalty:) Of seeds 0-27 the forward pass failed so in 2, 4, 5 and 22; in 2 both passes
     agree on the wrong place, which smoothing cannot fix, and in 22 some smoothed scans keep a wrong claim."""
     log, truth = _office_log(seed)
     res = smooth.smooth_log(office(), log, rng=np.random.default_rng(seed),
@@ -223,7 +223,9 @@ def test_smoothing_fixes_a_forward_pass_localized_in_the_wrong_place(seed):
     if np.sum((fw.state == "localized") & (e_f > 1.0)) <= 10:
         pytest.skip(f"seed {seed}: the forward pass no longer fails with these defaults; pick a seed where it does")
     loc = res.state == "localized"
-    assert loc.sum() > 25 and np.all(e[loc] < 0.5)
+    assert np.all(e[loc] < 0.5)                                  # no smoothed scan claims a wrong place ...
+    right_fw = np.sum((fw.state == "localized") & (e_f < 0.5))
+    assert loc.sum() >= 10 and loc.sum() > right_fw + 5         # ... and clearly more scans are rightly localized
     assert any(d["chosen"] == "backward" for d in res.smooth.summary()["disagreements"])
 
 
