@@ -1662,9 +1662,10 @@ def run_filter(
             recent = (recent + [float(fit[k])])[-int(rules.fit_window):]
             fit_s = float(np.mean(recent))
             wrong = fit_s < rules.restart_fit * fit_expected
-            if agreed or not (gathered and wrong):   # a loosely gathered cloud's poor fit alone does not count
-                poor = poor + 1 if (agreed and wrong) else 0
-                unjudged = 0 if poor == 0 else unjudged
+            if agreed and wrong:
+                poor += 1
+            elif not (gathered and wrong):           # a loosely gathered cloud's poor fit leaves the count as it is
+                poor = unjudged = 0
         elif do_update and gathered and grid is not None and _is_scan(z) and n_valid[k] >= rules.min_beams:
             poor += 1
             unjudged += 1

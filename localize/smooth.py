@@ -605,8 +605,9 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
     s = combine(fw.trace, reverse_trace(bw.trace), fit, odometry=log.odometry, agree_distance=agree_distance,
                 agree_heading=agree_heading)
     tr = smoothed_trace(s)
-    res = SmoothResult(times=fw.times, trace=tr, odometry_check=sign_check, smooth=s, columns={"passes": s.passes, "source": s.source},
-                       forward=fw, backward=bw, seconds_combine=_now() - t0)
+    res = SmoothResult(times=fw.times, trace=tr, odometry_check=sign_check, smooth=s,
+                       columns={"passes": s.passes, "source": s.source}, forward=fw, backward=bw,
+                       seconds_combine=_now() - t0)
     return res
 
 
