@@ -1477,9 +1477,16 @@ def run_filter(
         have not fitted the map there for this many updates in a row, the
         filter is probably confidently wrong. As many uniform particles as at
         the start (``kld.n_max`` with KLD-sampling) are added beside the
-        current cloud, each half of the weight: if the old place was right it
-        keeps winning, if not the new particles find the robot. ``events``
-        says so. While the state is still ``searching`` (never localized since
+        current cloud, each half of the weight, and the two clouds are on
+        probation side by side for up to 30 updates (each resampled within
+        itself, keeping its share; ``recovery_injection`` goes to the new one
+        only). The new search replaces the old place only if it beats it on
+        both the sensor model's evidence (its share of the weight) *and* the
+        ray-cast fit of the recent scans at its best cluster: a look-alike
+        whose beams end in the map's unknown cells (scored neutrally by a
+        likelihood field) can win the weight, not the fit. Meanwhile the
+        estimate is the favoured place and ``best_weight`` its share of the
+        whole cloud, so the state stays honest. ``events`` says which won. While the state is still ``searching`` (never localized since
         the start or the last restart), a cloud *gathered*
         on one place (best cluster share within the rules, spread within four
         times ``max_spread``) counts as well, and so does an update whose fit
@@ -1590,6 +1597,7 @@ def run_filter(
     unjudged = 0               # updates of the current poor run whose fit the map could not judge
     soft_penalty = bool(np.isfinite(getattr(mcl, "occupied_penalty", np.inf)))   # ... and for occupied_penalty
     n_skipped = n_blind = 0
+    trial: dict | None = None  # after a restart: the old cloud (particles [:n_old]) on probation beside the fresh one
     t0 = _now()
     for k in range(t):
         st.resampled = False
@@ -1638,6 +1646,8 @@ def run_filter(
                 sub = np.linspace(0, mcl.n - 1, int(snapshot_particles)).astype(int)
             snaps[k] = (mcl.particles[sub].copy(), w[sub].copy())
         e = mcl.estimate()
+        if trial is not None:
+            e = _trial_estimate(mcl, trial, e)
         pose = e.pose if np.all(np.isfinite(e.pose)) else e.mean
         out["poses"][k], out["means"][k], out["stds"][k] = pose, e.mean, e.std
         spread[k], best[k], n_eff[k] = e.spread, e.best_weight, st.n_eff
@@ -1649,6 +1659,11 @@ def run_filter(
             on_map[k] = inside
         if do_update and grid is not None and n_valid[k] > 0 and _is_scan(z):
             fit[k] = _scan_fit(caster, pose, offset, ranges[valid], angles[valid], fit_d, rules.min_beams)
+            if trial is not None:          # the fit of both places on probation (NaN: the map cannot judge: 0)
+                for g, g_pose in enumerate(trial["poses"]):
+                    f_g = fit[k] if g == trial["shown"] else _scan_fit(caster, g_pose, offset, ranges[valid],
+                                                                        angles[valid], fit_d, rules.min_beams)
+                    trial["fits"][g] = (trial["fits"][g] + [0.0 if np.isnan(f_g) else f_g])[-int(rules.fit_window):]
         off_map = grid is not None and on_map[k] == 0.0
         if off_map and soft_penalty and mcl.soft_obstacles:
             # a cloud in an obstacle the map may be wrong about is not off the map; outside the grid it is
@@ -1675,10 +1690,14 @@ def run_filter(
             mcl.particles = mcl.particles + noise
             mcl.particles[:, 2] = wrap_angle(mcl.particles[:, 2])
             n_expanded += 1
-        if restart_after and poor >= restart_after and mcl.sampler is not None:
+        if trial is not None and do_update and not degenerate:
+            trial["updates"] += 1
+        if restart_after and poor >= restart_after and mcl.sampler is not None and trial is None:
             # global localization again, without throwing the current hypothesis away: the old cloud keeps
-            # half of the weight, n_restart uniform particles share the other half; the next scans decide
+            # half of the weight, n_restart uniform particles share the other half; on probation (_probation)
+            # the next scans decide which of the two stays
             fresh = np.asarray(mcl.sampler(n_restart, mcl.rng), dtype=float)
+            trial = {"n_old": mcl.n, "updates": 0, "k": k, "fits": [[], []], "poses": (pose, pose), "shown": 0}
             mcl.particles = np.vstack([mcl.particles, fresh])
             mcl.log_weights = np.concatenate([mcl.log_weights + np.log(0.5),
                                               np.full(n_restart, np.log(0.5 / n_restart))])
@@ -1695,11 +1714,14 @@ def run_filter(
             if cur == "localized":
                 cur = "lost"
         elif recover and (degenerate or off_map) and mcl.sampler is not None:
+            trial = None
             mcl.particles = np.asarray(mcl.sampler(mcl.n, mcl.rng), dtype=float)
             mcl.log_weights = np.full(mcl.n, -np.log(mcl.n))
             why = "every particle got zero likelihood" if degenerate else "every particle left the map's free space"
             agreed_before = False
             events.append((k, f"{why}: particles re-drawn over the map (global localization again)"))
+        elif trial is not None:
+            trial = _probation(mcl, trial, events, k, recovery_injection if cur == "lost" else 0.0)
         elif mcl.needs_resampling() or (cur == "lost" and recovery_injection > 0 and do_update):
             if cur == "lost" and recovery_injection > 0 and mcl.sampler is not None:
                 mcl.injection = max(base_injection, float(recovery_injection))
@@ -1750,6 +1772,86 @@ def run_filter(
                     n_eff=n_eff, n_particles=n_p, n_injected=n_inj, p_inject=p_inj, updated=updated,
                     resampled=resampled, degenerate=degen, n_valid=n_valid, fit=fit, on_map=on_map, state=state,
                     events=events, beam_evaluations=evals, seconds=seconds, snapshots=snaps)
+
+
+#: A restart's probation (:func:`_probation`): at least this many updates, at most this many, and the
+#: share of the weight (log) below which the losing cloud is dropped early. Not fitted to a log: 30
+#: updates is :class:`StateRules`' default ``fit_window`` (5) six times over, 1e-4 a share no resampling of
+#: a few thousand particles would keep a particle of.
+PROBATION = (3, 30, float(np.log(1e-4)))
+
+
+def _trial_shares(mcl: MCL, n_old: int) -> NDArray:
+    lw = mcl.log_weights
+    sh = np.array([_rs.logsumexp(lw[:n_old]), _rs.logsumexp(lw[n_old:])])
+    return sh - _rs.logsumexp(sh)
+
+
+def _trial_favours(trial: dict, shares: NDArray) -> int:
+    """1 when the fresh cloud beats the old one on both the weight (the sensor model's evidence since the
+    restart) and the recent ray-cast fit at its best cluster; else 0 (the old place: the robot's history)."""
+    if not np.all(np.isfinite(shares)):           # one cloud has no weight left at all: the other one
+        return int(np.isfinite(shares[1]))
+    f_old, f_new = (float(np.mean(f)) if f else 0.0 for f in trial["fits"])
+    return int(shares[1] > shares[0] and f_new > f_old)
+
+
+def _trial_estimate(mcl: MCL, trial: dict, e: Estimate) -> Estimate:
+    """The estimate while a restart is on probation: the best cluster of the place favoured so far
+    (:func:`_trial_favours`), its share of the weight counted against the whole cloud."""
+    n_old = trial["n_old"]
+    shares = _trial_shares(mcl, n_old)
+    lw = mcl.log_weights
+    ests = []
+    for sl, sh in zip((slice(0, n_old), slice(n_old, None)), shares):
+        # within the group, from the log-weights: a group far behind would underflow in mcl.weights
+        wg = np.exp(lw[sl] - _rs.logsumexp(lw[sl])) if np.isfinite(sh) else np.full(len(lw[sl]), 1.0 / len(lw[sl]))
+        ests.append(_estimate(mcl.particles[sl], wg / wg.sum(), 0.5, 0.01, 0.9))
+    trial["poses"] = tuple(g.pose if np.all(np.isfinite(g.pose)) else g.mean for g in ests)
+    g = trial["shown"] = _trial_favours(trial, shares)
+    eg = ests[g]
+    return Estimate(eg.pose, e.mean, e.std, e.cov, float(np.exp(shares[g]) * eg.best_weight), e.n_clusters, e.n_eff,
+                    eg.cluster_std)
+
+
+def _probation(mcl: MCL, trial: dict, events: list, k: int, injection: float) -> dict | None:
+    """One step of a restart's probation: the old cloud (the first ``trial["n_old"]`` particles) and the
+    fresh one are resampled each within itself, keeping their shares of the weight. The trial ends after
+    ``PROBATION[1]`` updates, or earlier (after at least ``PROBATION[0]``) when one cloud holds less than
+    ``exp(PROBATION[2])`` of the weight and the fit agrees with the weight; the fresh cloud replaces the
+    old one only when it beats it on both (:func:`_trial_favours`). Returns the trial, or None when decided."""
+    n_old = trial["n_old"]
+    lw, every = mcl.log_weights, mcl.particles
+    shares = _trial_shares(mcl, n_old)
+    lo_min, hi, floor = PROBATION
+    win = _trial_favours(trial, shares)
+    done = trial["updates"] >= hi or not np.isfinite(shares[1 - win]) or (
+        trial["updates"] >= lo_min and shares[1 - win] < floor)
+    base = mcl.injection
+    parts, logw = [], []
+    groups = (slice(0, n_old), slice(n_old, None))
+    for g, (sl, share) in enumerate(zip(groups, shares)):
+        if done and g != win:
+            continue
+        mcl.particles, mcl.log_weights = every[sl], lw[sl] - _rs.logsumexp(lw[sl])
+        mcl.injection = max(base, injection) if g == 1 else 0.0
+        if mcl.needs_resampling():
+            mcl.resample()
+        mcl.injection = base
+        parts.append(mcl.particles)
+        logw.append(mcl.log_weights + (0.0 if done else share))
+    mcl.particles = np.vstack(parts)
+    mcl.log_weights = np.concatenate(logw)
+    mcl.log_weights -= _rs.logsumexp(mcl.log_weights)
+    mcl.status.n_particles = mcl.n
+    if done:
+        f_old, f_new = (float(np.mean(f)) if f else 0.0 for f in trial["fits"])
+        kept = "the particles drawn over the map" if win else "the old place"
+        events.append((k, f"after {trial['updates']} updates {kept} won (weight {np.exp(shares[1]):.2g} of the "
+                          f"new, recent fit {f_new:.2f} against {f_old:.2f} of the old): the other cloud dropped"))
+        return None
+    trial["n_old"] = len(parts[0])
+    return trial
 
 
 def _pinned(sensor: Any, pose: NDArray, z: tuple, shift: float, min_contrast: float, n_valid: int) -> bool:

@@ -924,3 +924,84 @@ def test_run_filter_scores_every_beam_while_searching():
         out.append((tr.poses, sensor.seen))
     np.testing.assert_array_equal(out[0][0], out[1][0])
     assert all(np.all(s == 2.0) for s in out[0][1])
+
+
+# --------------------------------------------------- restarts on probation (run_filter's restart_after)
+class _Prefers:
+    """A sensor model that scores a pose by its distance to one place, whatever the scan says.
+
+    It stands for a likelihood that favours a look-alike (a likelihood field scores beams that end in a
+    map's unknown cells neutrally, so a wrong place where most beams do can outscore the right one):
+    only the ray-cast fit can tell which place the scans belong to.
+    """
+
+    sensor_offset, min_range, max_range, sigma_hit, z_hit = np.zeros(3), 0.0, 8.0, 0.2, 0.9
+
+    def __init__(self, place):
+        self.place = np.asarray(place, dtype=float)
+
+    def log_likelihood(self, poses, ranges, angles):
+        d = poses[:, :2] - self.place[:2]
+        dth = np.angle(np.exp(1j * (poses[:, 2] - self.place[2])))
+        return -0.5 * np.sum(d * d, axis=1) / 0.5**2 - 0.5 * (dth / 0.3) ** 2
+
+
+_HERE, _THERE = np.array([3.0, 3.0, 0.0]), np.array([15.0, 8.0, 0.0])   # free poses 13 m apart in the office
+
+
+def _restart_run(start, prefers, clutter, sampler=None, n_steps=45):
+    """A stationary robot at _HERE: ``clutter`` scans that fit nowhere (every beam 0.3 m), then true scans."""
+    from localize.mcl import run_filter
+    from localize.raycast import RayCaster
+
+    g = office()
+    angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)
+    true_scan = RayCaster(g, 8.0).cast(_HERE[None], angles)[0]
+    sampler = sampler or (lambda n, rng: uniform_particles(g, n, rng))
+    f = MCL.gaussian(start, np.diag([0.02, 0.02, 0.01]) ** 2, 2000, (0.0,) * 4, _Prefers(prefers),
+                     rng=np.random.default_rng(3), sampler=sampler)
+    return run_filter(f, n_steps, lambda k: None, lambda k: (np.full(36, 0.3) if k < clutter else true_scan, angles),
+                      grid=g, restart_after=3)
+
+
+def test_a_restart_keeps_the_right_place_when_a_look_alike_only_wins_the_likelihood():
+    tr = _restart_run(_HERE, _THERE, clutter=8)
+    restarts = [k for k, t in tr.events if "global localization again" in t]
+    ends = [(k, t) for k, t in tr.events if " won (" in t]
+    assert restarts == [2]                          # three cluttered scans that do not fit: a restart ...
+    # ... the fresh particles find _THERE, which takes all the weight, but the scans fit _HERE only:
+    # the trial runs its full length and the old place stays
+    assert len(ends) == 1 and "after 30 updates the old place won" in ends[0][1]
+    assert "weight 1 of the new" in ends[0][1]
+    err = np.hypot(*(tr.poses[:, :2] - _HERE[:2]).T)
+    assert err.max() < 0.2                          # the estimate never jumps to the look-alike
+    # while on probation the shown place holds almost none of the weight: the state does not pretend
+    assert np.all(tr.best_weight[3:32] < 1e-3)
+    assert not np.any(tr.state[3:32] == "localized")
+
+
+def test_a_restart_replaces_a_wrong_place_that_loses_both_likelihood_and_fit():
+    def room(n, rng):                               # global localization over the robot's room
+        return np.column_stack([rng.uniform(1, 6, n), rng.uniform(1, 5, n), rng.uniform(-np.pi, np.pi, n)])
+
+    tr = _restart_run(_THERE, _HERE, clutter=0, sampler=room)
+    ends = [t for _, t in tr.events if " won (" in t]
+    assert [k for k, t in tr.events if "global localization again" in t] == [2]
+    # the old cloud's share falls below 1e-4 within the first updates and the fit agrees: decided early
+    assert len(ends) == 1 and "after 3 updates the particles drawn over the map won" in ends[0]
+    err = np.hypot(*(tr.poses[:, :2] - _HERE[:2]).T)
+    assert err[0] > 10 and np.all(err[6:] < 0.3)
+
+
+def test_a_probation_survives_a_cloud_with_no_weight_left():
+    """A group whose every particle got zero likelihood is dropped, not turned into NaN weights."""
+    from localize.mcl import _probation
+
+    f = MCL.gaussian([3.0, 3.0, 0.0], np.eye(3) * 1e-4, 10, (0.0,) * 4, XYSensor(), rng=np.random.default_rng(0))
+    f.particles = np.vstack([f.particles, f.particles + [1.0, 0.0, 0.0]])
+    f.log_weights = np.concatenate([np.full(10, -np.inf), np.full(10, -np.log(10))])
+    events = []
+    trial = {"n_old": 10, "updates": 1, "k": 0, "fits": [[0.9], [0.1]], "poses": (_HERE, _HERE), "shown": 0}
+    assert _probation(f, trial, events, 7, 0.0) is None
+    assert f.n == 10 and np.all(np.isfinite(f.log_weights)) and np.allclose(f.particles[:, 0], 4.0, atol=0.1)
+    assert "particles drawn over the map won" in events[0][1]

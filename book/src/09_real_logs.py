@@ -585,7 +585,16 @@ plt.show()
 # * **`--restart-after 5`** — when the cloud has agreed on a place where the
 #   scans have not fitted the map for five updates, it is confidently wrong:
 #   global localization starts again, with as many new particles as at the
-#   start beside the old cloud, half of the weight each. Before the first
+#   start beside the old cloud, half of the weight each. The two clouds are
+#   then on probation side by side, each resampled on its own, for up to 30
+#   updates. The new search replaces the old place only if it wins on both
+#   counts: the weight the sensor model gives it *and* the share of beams
+#   whose reading matches the range ray-cast in the map (the fit). The
+#   likelihood field alone would often pick a look-alike whose beams end in
+#   the map's unknown cells, since it scores those neutrally; the ray cast
+#   cannot judge them and so does not reward them. Meanwhile the estimate is
+#   the place favoured so far, with only its share of the weight, so the
+#   state does not claim "localized". Before the first
 #   localization, a cloud gathered less tightly (within 2 m) also counts, and
 #   so does an update whose fit the map cannot judge because the beams at the
 #   estimate end in unknown cells. A wrong room whose beams all end in the
@@ -629,8 +638,8 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 
 # %% [markdown]
 # The target of the issue that asked for this benchmark — 95% success on every
-# log — is reached on the four real logs, Intel (100%), Freiburg 079 (95%),
-# ACES (100%) and CSAIL (98%), and not on the simulated Willow runs (75%).
+# log — is reached on the four real logs, Intel (100%), Freiburg 079 (97%),
+# ACES (100%) and CSAIL (98%), and not on the simulated Willow runs (87%).
 # Each default named above is there for one of these failures. The map-sized
 # initial cloud is for ACES, where a fixed cloud of 50,000 particles, started
 # in a stretch of the building that looks the same in several places, often
@@ -640,18 +649,21 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # they failed at every seed, because the cloud was pulled out of the square.
 # The short-reading floor is for unmapped clutter. The same runs with
 # `--z-short 0` (the section `bench_global_z_short_0` of
-# `benchmarks/RESULTS.md`) succeed on Willow in 57% instead of 75% and on
-# ACES in 90% instead of 100% (on Freiburg in 97% instead of 95%, on Intel
+# `benchmarks/RESULTS.md`) succeed on Willow in 63% instead of 87% and on
+# ACES in 90% instead of 100% (on Freiburg in 98% instead of 97%, on Intel
 # and CSAIL equally often). Willow's simulated robot drives among ten
 # unmapped objects per run, and their beams end short of the mapped walls. The odometry check is for
 # Freiburg. With `--odometry-sign trust` (section
-# `bench_global_odometry_sign_trust`) Freiburg succeeds in 80% instead of 95%,
-# and the runs from start scans 709, 1182 and 1655 fail at every seed. The
-# first two are the runs in which the robot backs up most often (in 37 and
-# 50 of their 300 steps) while its odometry says forwards. Willow is the largest of the five
-# buildings. Its simulated robot turns on the spot wherever it is blocked,
-# unmapped clutter stands in its way, and much of its map is unknown, so a
-# wrong place whose beams end in the unknown can look as good as the right one.
+# `bench_global_odometry_sign_trust`) Freiburg succeeds in 87% instead of 97%,
+# and the runs from start scans 709 and 1182 fail at every seed: the runs in
+# which the robot backs up most often (in 37 and 50 of their 300 steps) while
+# its odometry says forwards. The probation of a restart is for Willow, the
+# largest of the five buildings. Its simulated robot turns on the spot
+# wherever it is blocked, unmapped clutter stands in its way, and much of its
+# map is unknown, so a wrong place whose beams end in the unknown can look as
+# good as the right one to the likelihood field. When clutter makes a correct
+# cloud fit poorly for a few scans, the restart's new particles find such a
+# place; deciding by the weight alone, the filter would jump there.
 #
 # What the table does show is honesty: no run ended "localized" while more
 # than 1 m off. A failed run ended either "lost" or "searching", and said so,
@@ -666,16 +678,16 @@ if section:
         ok, runs = cells[2].split()[0].split("/")
         rows[name] = dict(success=int(ok) / int(runs), off=int(cells[9]))
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rows), sorted(rows)
-    claims = {"intel": 1.0, "freiburg-079": 0.95, "aces": 1.0, "csail": 0.98, "willow": 0.75}
+    claims = {"intel": 1.0, "freiburg-079": 0.97, "aces": 1.0, "csail": 0.98, "willow": 0.87}
     for log_name, rate in claims.items():
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
     assert sorted(n for n, r in rows.items() if r["success"] >= 0.95) == ["aces", "csail", "freiburg-079", "intel"]
     assert all(r["off"] == 0 for r in rows.values())
     without = {name: cells[2].split()[0] for name, cells in table_rows(results_section("bench_global_z_short_0")).items()}
-    assert without == {"intel": "60/60", "freiburg-079": "58/60", "aces": "54/60", "csail": "59/60",
-                       "willow": "34/60"}, without
+    assert without == {"intel": "60/60", "freiburg-079": "59/60", "aces": "54/60", "csail": "59/60",
+                       "willow": "38/60"}, without
     trusted = table_rows(results_section("bench_global_odometry_sign_trust"))["freiburg-079"][2].split()[0]
-    assert trusted == "48/60", trusted
+    assert trusted == "52/60", trusted
 
 # %% tags=["remove-cell"]
 from localize.grid import OccupancyGrid  # noqa: E402
@@ -1029,14 +1041,14 @@ plt.show()
 # On the benchmark's logs and degraded maps (`benchmarks/bench_smooth.py`: the
 # same runs as `bench_global`, 20 starts x 2 seeds per data set, each
 # trajectory judged by bench_global's rule), the forward pass alone now
-# succeeds in 188 of 200 runs, and smoothing does not add to that: it turns 3
-# failures into successes and 4 successes into failures (187 of 200). What it
+# succeeds in 193 of 200 runs, and smoothing adds little to that: it turns 4
+# failures into successes and 3 successes into failures (194 of 200). What it
 # adds is the share of each log that is localized — 94% of the scans instead
-# of 85% — because the backward pass localizes the start that the forward
+# of 86% — because the backward pass localizes the start that the forward
 # pass spends searching, and fewer wrong claims: 2 runs instead of 6 have a
 # scan called localized while more than 1 m off (the table's next-to-last
-# column). It cannot help where both passes go wrong at the same place (many
-# of the simulated Willow runs), and a pass that is wrong with confidence can
+# column). It cannot help where both passes go wrong at the same place, and
+# a pass that is wrong with confidence can
 # still win a stretch. It is an
 # offline tool: it needs the whole log and takes more than twice the time
 # of one pass. The table, from `benchmarks/RESULTS.md` (the cell after it
@@ -1049,9 +1061,9 @@ print(section or "benchmarks/RESULTS.md has no bench_smooth section yet")
 # %% tags=["remove-cell"]
 if section:
     every = table_rows(section)["all"]
-    assert every[2].startswith("188/200") and every[3].startswith("187/200"), every
-    assert (every[4], every[5]) == ("3", "4"), every
-    assert every[6] == "85% / 94%" and every[8] == "6 / 2", every
+    assert every[2].startswith("193/200") and every[3].startswith("194/200"), every
+    assert (every[4], every[5]) == ("4", "3"), every
+    assert every[6] == "86% / 94%" and every[8] == "6 / 2", every
     seconds = [float(v) for v in every[9].split("/")]
     assert seconds[1] > 2 * seconds[0], every          # "more than twice the time of one pass"
 
