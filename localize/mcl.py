@@ -1486,8 +1486,9 @@ def run_filter(
         whose beams end in the map's unknown cells (scored neutrally by a
         likelihood field) can win the weight, not the fit. Meanwhile the
         estimate is the favoured place and ``best_weight`` its share of the
-        whole cloud, so the state stays honest. ``events`` says which won. While the state is still ``searching`` (never localized since
-        the start or the last restart), a cloud *gathered*
+        whole cloud, so the state stays honest. ``events`` says which won.
+        While the state is still ``searching`` (never localized since the
+        start or the last restart), a cloud *gathered*
         on one place (best cluster share within the rules, spread within four
         times ``max_spread``) counts as well, and so does an update whose fit
         the map cannot judge (too few beams end on known cells): a cloud that
@@ -1697,7 +1698,7 @@ def run_filter(
             # half of the weight, n_restart uniform particles share the other half; on probation (_probation)
             # the next scans decide which of the two stays
             fresh = np.asarray(mcl.sampler(n_restart, mcl.rng), dtype=float)
-            trial = {"n_old": mcl.n, "updates": 0, "k": k, "fits": [[], []], "poses": (pose, pose), "shown": 0}
+            trial = {"n_old": mcl.n, "updates": 0, "fits": [[], []], "poses": (pose, pose), "shown": 0}
             mcl.particles = np.vstack([mcl.particles, fresh])
             mcl.log_weights = np.concatenate([mcl.log_weights + np.log(0.5),
                                               np.full(n_restart, np.log(0.5 / n_restart))])
@@ -1787,12 +1788,18 @@ def _trial_shares(mcl: MCL, n_old: int) -> NDArray:
     return sh - _rs.logsumexp(sh)
 
 
+def _trial_fits(trial: dict) -> tuple[float, float]:
+    """The mean recent ray-cast fit of the old and of the fresh cloud's best cluster (0 before any)."""
+    f_old, f_new = (float(np.mean(f)) if f else 0.0 for f in trial["fits"])
+    return f_old, f_new
+
+
 def _trial_favours(trial: dict, shares: NDArray) -> int:
     """1 when the fresh cloud beats the old one on both the weight (the sensor model's evidence since the
     restart) and the recent ray-cast fit at its best cluster; else 0 (the old place: the robot's history)."""
     if not np.all(np.isfinite(shares)):           # one cloud has no weight left at all: the other one
         return int(np.isfinite(shares[1]))
-    f_old, f_new = (float(np.mean(f)) if f else 0.0 for f in trial["fits"])
+    f_old, f_new = _trial_fits(trial)
     return int(shares[1] > shares[0] and f_new > f_old)
 
 
@@ -1803,10 +1810,11 @@ def _trial_estimate(mcl: MCL, trial: dict, e: Estimate) -> Estimate:
     shares = _trial_shares(mcl, n_old)
     lw = mcl.log_weights
     ests = []
-    for sl, sh in zip((slice(0, n_old), slice(n_old, None)), shares):
-        # within the group, from the log-weights: a group far behind would underflow in mcl.weights
-        wg = np.exp(lw[sl] - _rs.logsumexp(lw[sl])) if np.isfinite(sh) else np.full(len(lw[sl]), 1.0 / len(lw[sl]))
-        ests.append(_estimate(mcl.particles[sl], wg / wg.sum(), 0.5, 0.01, 0.9))
+    for sl in (slice(0, n_old), slice(n_old, None)):
+        # within the group, from the log-weights (uniform if it has none left): a group far behind would
+        # underflow in mcl.weights
+        wg, _ = _rs.normalize_log_weights(lw[sl])
+        ests.append(_estimate(mcl.particles[sl], wg, 0.5, 0.01, 0.9))
     trial["poses"] = tuple(g.pose if np.all(np.isfinite(g.pose)) else g.mean for g in ests)
     g = trial["shown"] = _trial_favours(trial, shares)
     eg = ests[g]
@@ -1845,7 +1853,7 @@ def _probation(mcl: MCL, trial: dict, events: list, k: int, injection: float) ->
     mcl.log_weights -= _rs.logsumexp(mcl.log_weights)
     mcl.status.n_particles = mcl.n
     if done:
-        f_old, f_new = (float(np.mean(f)) if f else 0.0 for f in trial["fits"])
+        f_old, f_new = _trial_fits(trial)
         kept = "the particles drawn over the map" if win else "the old place"
         events.append((k, f"after {trial['updates']} updates {kept} won (weight {np.exp(shares[1]):.2g} of the "
                           f"new, recent fit {f_new:.2f} against {f_old:.2f} of the old): the other cloud dropped"))

@@ -1001,7 +1001,7 @@ def test_a_probation_survives_a_cloud_with_no_weight_left():
     f.particles = np.vstack([f.particles, f.particles + [1.0, 0.0, 0.0]])
     f.log_weights = np.concatenate([np.full(10, -np.inf), np.full(10, -np.log(10))])
     events = []
-    trial = {"n_old": 10, "updates": 1, "k": 0, "fits": [[0.9], [0.1]], "poses": (_HERE, _HERE), "shown": 0}
+    trial = {"n_old": 10, "updates": 1, "fits": [[0.9], [0.1]], "poses": (_HERE, _HERE), "shown": 0}
     assert _probation(f, trial, events, 7, 0.0) is None
     assert f.n == 10 and np.all(np.isfinite(f.log_weights)) and np.allclose(f.particles[:, 0], 4.0, atol=0.1)
     assert "particles drawn over the map won" in events[0][1]
