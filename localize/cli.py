@@ -877,9 +877,10 @@ FILTER_OPTIONS: tuple[FilterOption, ...] = (
         updates in a row: it is confidently wrong. Before the filter is first localized, a cloud gathered
         more loosely (within 2 m) counts too, and so do updates at which the map cannot judge the scans at all
         (their beams end in its unknown cells): a cloud stuck on such a place would otherwise search there
-        for ever. The old cloud and the new search then run side by side for up to 30 updates; the new one
-        replaces the old place only if it wins both the sensor model's weight and the ray-cast fit of the
-        scans (default {default}; 0 never). Example: --restart-after 5"""),
+        for ever. A "lost" filter whose best place has not fitted the scans for K updates restarts too. The
+        old cloud and the new search then run side by side for up to 30 updates; the new one replaces the old
+        place only if it wins both the sensor model's weight and the ray-cast fit of the scans, and fits them
+        acceptably (default {default}; 0 never). Example: --restart-after 5"""),
     FilterOption("--min-ess", _nonneg_float, metavar="F", help="""
         adaptive tempering: no single scan may leave fewer than F*N effective particles, so the first scans
         cannot collapse the cloud onto a look-alike place (default {default}; 0 off). Example: --min-ess 0.1"""),

@@ -1184,7 +1184,12 @@ class StateRules:
       can agree with itself on a wrong place (a converged cloud in a room
       that looks alike); the fit catches most of that, because the
       likelihood field never checks whether a beam passed through a wall,
-      and the ray cast does.
+      and the ray cast does. Beams whose cast ray ends in an unknown cell
+      are not judged; with fewer than ``min_beams`` judged the update has no
+      fit. No judged fit since the start or the last restart is no evidence:
+      it keeps a localized state (the last fits stand), it never makes one
+      (runs without a map or without range scans have no fit at all, and the
+      other conditions decide).
 
     * the scan *pins* the pose: moved by ``probe_shift`` metres forwards,
       backwards, left or right, the estimate must fit the scan worse by at
@@ -1482,11 +1487,15 @@ def run_filter(
         itself, keeping its share; ``recovery_injection`` goes to the new one
         only). The new search replaces the old place only if it beats it on
         both the sensor model's evidence (its share of the weight) *and* the
-        ray-cast fit of the recent scans at its best cluster: a look-alike
+        ray-cast fit of the recent scans at its best cluster, and that fit is
+        at least ``rules.restart_fit`` times the expected one (better than a
+        poorly fitting old place is not yet the robot's place): a look-alike
         whose beams end in the map's unknown cells (scored neutrally by a
         likelihood field) can win the weight, not the fit. Meanwhile the
-        estimate is the favoured place and ``best_weight`` its share of the
-        whole cloud, so the state stays honest. ``events`` says which won.
+        estimate is the favoured place (the old one until each cloud has had
+        three scans fitted: one or two are no evidence) and ``best_weight``
+        its share of the whole cloud, so the state stays honest. ``events``
+        says which won.
         While the state is still ``searching`` (never localized since the
         start or the last restart), a cloud *gathered*
         on one place (best cluster share within the rules, spread within four
@@ -1494,7 +1503,13 @@ def run_filter(
         the map cannot judge (too few beams end on known cells): a cloud that
         collapsed onto a place the map knows nothing about (a wrong room
         whose beams all end in unknown cells scores as well as the right
-        one) would otherwise search there to the end of the log.
+        one) would otherwise search there to the end of the log. And a
+        ``lost`` filter whose best place has not fitted the scans for this
+        many updates (updates the map cannot judge leave the count as it
+        is) restarts too, whether its cloud agrees on that place or has
+        spread out (after a kidnapping): lost, it has already said that it
+        does not know, and the probation keeps the old place if the search
+        finds nothing better.
     expand : (metres, radians)
         Expansion resetting (Ueda et al. 2004): when the cloud has agreed on
         one place but the scan just used does not fit the map there (its fit
@@ -1553,7 +1568,7 @@ def run_filter(
     ex_xy, ex_th = (float(v) for v in expand)
     if not (np.isfinite(ex_xy) and np.isfinite(ex_th) and ex_xy >= 0 and ex_th >= 0):
         raise ValueError(f"expand must be two numbers >= 0 (metres, radians); got {expand!r}")
-    poor = 0
+    poor = lost_run = 0
     recent: list[float] = []
     fit_s = float("nan")
     t = int(n_steps)
@@ -1682,6 +1697,9 @@ def run_filter(
                 poor += 1
             elif not (gathered and wrong):           # a loosely gathered cloud's poor fit leaves the count as it is
                 poor = unjudged = 0
+            # a lost filter whose best place does not fit the scans either, agreed on or not (outside a
+            # probation; an update the map cannot judge leaves the count as it is)
+            lost_run = lost_run + 1 if (cur == "lost" and wrong and trial is None) else 0
         elif do_update and gathered and grid is not None and _is_scan(z) and n_valid[k] >= rules.min_beams:
             poor += 1
             unjudged += 1
@@ -1693,21 +1711,26 @@ def run_filter(
             n_expanded += 1
         if trial is not None and do_update and not degenerate:
             trial["updates"] += 1
-        if restart_after and poor >= restart_after and mcl.sampler is not None and trial is None:
+        lost_run = lost_run if cur == "lost" else 0
+        if restart_after and max(poor, lost_run) >= restart_after and mcl.sampler is not None and trial is None:
             # global localization again, without throwing the current hypothesis away: the old cloud keeps
             # half of the weight, n_restart uniform particles share the other half; on probation (_probation)
             # the next scans decide which of the two stays
             fresh = np.asarray(mcl.sampler(n_restart, mcl.rng), dtype=float)
-            trial = {"n_old": mcl.n, "updates": 0, "fits": [[], []], "poses": (pose, pose), "shown": 0}
+            trial = {"n_old": mcl.n, "updates": 0, "fits": [[], []], "poses": (pose, pose), "shown": 0,
+                     "min_fit": rules.restart_fit * fit_expected}
             mcl.particles = np.vstack([mcl.particles, fresh])
             mcl.log_weights = np.concatenate([mcl.log_weights + np.log(0.5),
                                               np.full(n_restart, np.log(0.5 / n_restart))])
-            where = ("gathered on a place where the map could not judge the scans (their beams end in its "
-                     "unknown cells) or they did not fit it" if unjudged else
-                     "agreed on a place where the scans have not fitted the map")
-            events.append((k, f"the cloud {where} for {poor} updates: {n_restart} particles drawn over the map "
+            where = ("the cloud gathered on a place where the map could not judge the scans (their beams end in "
+                     "its unknown cells) or they did not fit it" if unjudged else
+                     "the cloud agreed on a place where the scans have not fitted the map")
+            if poor < restart_after:
+                where = "the filter has been lost, and the scans have not fitted the map at its best place,"
+                poor = lost_run
+            events.append((k, f"{where} for {poor} updates: {n_restart} particles drawn over the map "
                               "beside it (global localization again)"))
-            poor = 0
+            poor = lost_run = 0
             unjudged = 0
             good = 0
             agreed_before = False
@@ -1740,7 +1763,8 @@ def run_filter(
             confident = ((not _is_scan(z) or n_valid[k] >= rules.min_beams) and e.best_weight >= rules.min_share
                          and e.spread <= rules.max_spread
                          and (e.cluster_std is None or e.cluster_std[2] <= rules.max_heading_std)
-                         and (np.isnan(fit_s) or fit_s >= rules.min_fit * fit_expected))
+                         and (fit_s >= rules.min_fit * fit_expected if np.isfinite(fit_s) else
+                              cur == "localized" or grid is None or not _is_scan(z)))
             if confident and rules.probe_shift > 0 and _is_scan(z) and n_valid[k] > 0:
                 confident = _pinned(sensor, pose, z, rules.probe_shift, rules.min_contrast, int(n_valid[k]))
             if confident:
@@ -1796,11 +1820,14 @@ def _trial_fits(trial: dict) -> tuple[float, float]:
 
 def _trial_favours(trial: dict, shares: NDArray) -> int:
     """1 when the fresh cloud beats the old one on both the weight (the sensor model's evidence since the
-    restart) and the recent ray-cast fit at its best cluster; else 0 (the old place: the robot's history)."""
+    restart) and the recent ray-cast fit at its best cluster, with at least ``PROBATION[0]`` fits of each; else 0
+    (the old place: the robot's history)."""
     if not np.all(np.isfinite(shares)):           # one cloud has no weight left at all: the other one
         return int(np.isfinite(shares[1]))
+    if min(len(f) for f in trial["fits"]) < PROBATION[0]:     # one or two scans are no evidence yet: the old place
+        return 0
     f_old, f_new = _trial_fits(trial)
-    return int(shares[1] > shares[0] and f_new > f_old)
+    return int(shares[1] > shares[0] and f_new > f_old and f_new >= trial["min_fit"])
 
 
 def _trial_estimate(mcl: MCL, trial: dict, e: Estimate) -> Estimate:

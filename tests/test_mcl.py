@@ -891,14 +891,18 @@ def test_run_filter_skips_unknown_beams_only_once_the_cloud_agrees():
     g = _office_with_unknown_east(6.5)
     angles = np.array([0.0, 0.1, -0.1])
     scan = (np.full(3, 2.5), angles)                  # from (5, 5.5) heading east every end point is unknown
+    # the first scan looks west, at mapped walls: the map can judge it, so the filter may call itself localized
+    # (an unjudged fit never makes a state localized); the later ones look east
+    scans = [(np.full(3, 2.5), angles + np.pi)] + [scan] * 3
     rules = StateRules(hold=1, min_fit=0.0, restart_fit=0.0, probe_shift=0.0, min_beams=1)
     runs = {}
     for skip in (True, False):
         sensor = _RecordingField(g)
         f = MCL.gaussian([5.0, 5.5, 0.0], (0.02, 0.02, 0.01), 300, (0.0,) * 4, sensor, rng=np.random.default_rng(1))
-        tr = run_filter(f, 4, lambda k: None, lambda k: scan, grid=g, rules=rules, skip_unknown_beams=skip)
+        tr = run_filter(f, 4, lambda k: None, lambda k: scans[k], grid=g, rules=rules, skip_unknown_beams=skip)
         runs[skip] = (tr, sensor.seen)
     tr, seen = runs[True]
+    assert str(tr.state[0]) == "localized"
     # step 0: the cloud has not agreed yet (no previous step), so the scan is scored; after that it agrees
     # and every beam ends in unknown there: the scans are not used, and the trace says so
     assert list(tr.updated) == [True, False, False, False]
@@ -907,6 +911,31 @@ def test_run_filter_skips_unknown_beams_only_once_the_cloud_agrees():
     tr_all, seen_all = runs[False]
     assert tr_all.updated.all() and len(seen_all) == 4
     assert not any("left out" in t for _, t in tr_all.events)
+
+
+def test_a_fit_the_map_cannot_judge_never_makes_the_state_localized():
+    """A tight cloud whose every beam ends in the map's unknown cells has no evidence that the scans fit:
+    it stays searching however long it agrees with itself; once a judged scan has made it localized, the
+    unjudged ones that follow do not take that away."""
+    from localize.mcl import StateRules, run_filter
+
+    g = _office_with_unknown_east(6.5)
+    angles = np.array([0.0, 0.1, -0.1])
+    east = (np.full(3, 2.5), angles)                   # from (5, 5.5): every end point in unknown cells
+    west = (np.full(3, 2.5), angles + np.pi)           # towards mapped walls: the map can judge it
+    rules = StateRules(hold=1, min_fit=0.0, restart_fit=0.0, probe_shift=0.0, min_beams=1)
+
+    def run(scans):
+        f = MCL.gaussian([5.0, 5.5, 0.0], (0.02, 0.02, 0.01), 300, (0.0,) * 4, _RecordingField(g),
+                         rng=np.random.default_rng(1))
+        return run_filter(f, len(scans), lambda k: None, lambda k: scans[k], grid=g, rules=rules)
+
+    blind = run([east] * 6)
+    assert np.all(np.isnan(blind.fit)) and np.all(blind.best_weight > 0.9)   # agreed, but never judged
+    assert list(blind.state) == ["searching"] * 6 and blind.first_localized() is None
+    seen = run([west] + [east] * 5)
+    assert np.isfinite(seen.fit[0]) and np.all(np.isnan(seen.fit[1:]))
+    assert list(seen.state) == ["localized"] * 6
 
 
 def test_run_filter_scores_every_beam_while_searching():
@@ -1005,3 +1034,66 @@ def test_a_probation_survives_a_cloud_with_no_weight_left():
     assert _probation(f, trial, events, 7, 0.0) is None
     assert f.n == 10 and np.all(np.isfinite(f.log_weights)) and np.allclose(f.particles[:, 0], 4.0, atol=0.1)
     assert "particles drawn over the map won" in events[0][1]
+
+
+def test_a_probation_favours_a_new_place_only_on_enough_evidence():
+    """One or two scans are no evidence: early in a probation a fresh cloud that outweighs and outfits the old
+    place is not yet shown (the estimate would jump to a random pile of the new particles and back); nor is
+    one whose fit, though better than the old place's, is too poor to be the robot's place either."""
+    from localize.mcl import PROBATION, _trial_favours
+
+    shares = np.log([0.1, 0.9])                     # the fresh cloud holds most of the weight ...
+    for n in range(1, PROBATION[0] + 2):
+        trial = {"fits": [[0.2] * n, [0.8] * n], "min_fit": 0.4}   # ... and fits better at every scan so far
+        assert _trial_favours(trial, shares) == int(n >= PROBATION[0])
+    trial = {"fits": [[0.2] * 5, [0.8] * 5], "min_fit": 0.4}
+    assert _trial_favours(trial, np.log([0.9, 0.1])) == 0            # the weight decides too
+    # better than a poorly fitting old place is not enough: the new place must fit the scans acceptably
+    assert _trial_favours({"fits": [[0.1] * 5, [0.3] * 5], "min_fit": 0.4}, shares) == 0
+    assert _trial_favours({"fits": [[0.1] * 5, [0.5] * 5], "min_fit": 0.4}, shares) == 1
+    assert _trial_favours({"fits": [[0.2], [0.8]], "min_fit": 0.4}, np.array([-np.inf, 0.0])) == 1  # no weight left
+
+
+class _Fades(_Prefers):
+    """Prefers one place for the first ``until`` updates, then says nothing about any pose (a flat likelihood)."""
+
+    def __init__(self, place, until):
+        super().__init__(place)
+        self.until, self.calls = until, 0
+
+    def log_likelihood(self, poses, ranges, angles):
+        self.calls += 1
+        ll = super().log_likelihood(poses, ranges, angles)
+        return ll if self.calls <= self.until else np.zeros(len(poses))
+
+
+def test_a_filter_lost_for_restart_after_updates_searches_the_map_again():
+    """Lost without agreeing on a wrong place (the cloud spread out, the robot carried away): after restart_after
+    more updates whose scans do not fit the best place, global localization starts again on probation."""
+    from localize.mcl import StateRules, run_filter
+    from localize.raycast import RayCaster
+
+    g = office()
+    angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)
+    here, there = (RayCaster(g, 8.0).cast(p[None], angles)[0] for p in (_HERE, _THERE))
+
+    def motion(p, u, rng):                          # from step 10 on the odometry says nothing useful
+        return p + rng.normal(0.0, 1.0, p.shape) * [0.3, 0.3, 0.1]
+
+    def run(restart_after, kidnapped=True):
+        f = MCL.gaussian(_HERE, np.diag([0.02, 0.02, 0.01]) ** 2, 2000, motion, _Fades(_HERE, 10),
+                         rng=np.random.default_rng(5), sampler=lambda n, rng: uniform_particles(g, n, rng))
+        return run_filter(f, 60, lambda k: "drift" if k >= 10 else None,
+                          lambda k: (there if kidnapped and k >= 10 else here, angles), grid=g,
+                          restart_after=restart_after, rules=StateRules(probe_shift=0.0))  # the double pins nothing
+
+    tr = run(3)
+    assert tr.state[9] == "localized"
+    k_lost = tr.lost_intervals()[0][0]
+    restarts = [(k, t) for k, t in tr.events if "global localization again" in t]
+    assert restarts and restarts[0][0] == k_lost + 3 and "the filter has been lost" in restarts[0][1]
+    assert np.all(tr.spread[k_lost:restarts[0][0] + 1] > 0.5)          # not agreed: the other trigger could not fire
+    assert not any("global localization again" in t for _, t in run(0).events)   # 0: never
+    # lost while the scans still fit where it is (the odometry only blurred the cloud): no restart
+    calm = run(3, kidnapped=False)
+    assert calm.lost_intervals() and not any("global localization again" in t for _, t in calm.events)
