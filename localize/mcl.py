@@ -1725,10 +1725,11 @@ def run_filter(
             where = ("the cloud gathered on a place where the map could not judge the scans (their beams end in "
                      "its unknown cells) or they did not fit it" if unjudged else
                      "the cloud agreed on a place where the scans have not fitted the map")
+            n_poor = poor
             if poor < restart_after:
                 where = "the filter has been lost, and the scans have not fitted the map at its best place,"
-                poor = lost_run
-            events.append((k, f"{where} for {poor} updates: {n_restart} particles drawn over the map "
+                n_poor = lost_run
+            events.append((k, f"{where} for {n_poor} updates: {n_restart} particles drawn over the map "
                               "beside it (global localization again)"))
             poor = lost_run = 0
             unjudged = 0
