@@ -123,6 +123,7 @@ DEFAULTS: dict[str, Any] = {
     "unknown_penalty": 0.0,
     "expand": (0.0, 0.0),
     "unknown_beams": "skip",
+    "short_beams": 1.0,
     "odometry_sign": "auto",
     "occupied_penalty": 5.0,
 }
@@ -348,6 +349,7 @@ def localize_log(
     min_trans: float = 1e-3,
     expand: tuple[float, float] = DEFAULTS["expand"],
     unknown_beams: str = DEFAULTS["unknown_beams"],
+    short_beams: float = DEFAULTS["short_beams"],
     z_short: float = DEFAULTS["z_short"],
     odometry_sign: str = DEFAULTS["odometry_sign"],
     occupied_penalty: float = DEFAULTS["occupied_penalty"],
@@ -359,7 +361,8 @@ def localize_log(
     KLD-sampling, ``sigma_hit`` 0.2 m, short readings weighted 0.2
     (``z_short``), tempering 0.3, a 5 cm minimum range,
     particles allowed in unknown cells, restarts on (expansion resetting off),
-    beams that end in unknown cells at an agreed place left out (``unknown_beams``).
+    beams that end in unknown cells at an agreed place left out (``unknown_beams``),
+    and so are those reading more than 1 m shorter than the map there (``short_beams``).
 
     The filtering loop is :func:`localize.mcl.run_filter`, the one run driver
     (update gating, estimates, the searching / localized / lost state); this
@@ -452,6 +455,12 @@ def localize_log(
         map's unknown cells there are left out of the update
         (``skip_unknown_beams`` of :func:`localize.mcl.run_filter`); "score":
         every beam is scored.
+    short_beams : float
+        Metres: once the cloud agrees on one place, beams that read more than
+        this much shorter than the map's range from there (something the map
+        does not show in front) are left out of the update, unless more than
+        half of the scan does (``skip_short_beams`` of
+        :func:`localize.mcl.run_filter`); 0 scores them.
     z_short : float
         Likelihood field: weight in [0, 1] of short readings from unmapped
         obstacles (``z_short`` of :class:`localize.sensors.LikelihoodField`:
@@ -513,6 +522,7 @@ def localize_log(
                     min_motion=tuple(min_motion), rules=rules, snapshot_steps=snap_steps,
                     snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=recovery_injection,
                     restart_after=restart_after, expand=tuple(expand), skip_unknown_beams=unknown_beams == "skip",
+                    skip_short_beams=short_beams,
                     callback=None if progress is None else progress.update_to)
     return RunResult(times=np.asarray(log.times), trace=tr, odometry_check=sign_check)
 
@@ -895,6 +905,14 @@ FILTER_OPTIONS: tuple[FilterOption, ...] = (
         beam is scored, an end point in an unknown cell with one neutral score (default {default}). The map
         cannot say whether such a beam fits, and scored it pulls the cloud of a robot that drives through a
         region the map left unknown towards that region's known walls. Example: --unknown-beams score"""),
+    FilterOption("--short-beams", _nonneg_float, metavar="M", help="""
+        once the cloud agrees on one place, a beam that reads more than M metres shorter than the map's range
+        from there is left out of the update: it hit something the map does not show (a person, a chair, a box
+        in front of the mapped wall), and scored it lets a few particles at a wrong place, where its end point
+        lies on some mapped wall, take the weight from the robot's cloud. If more than half of a scan reads
+        short, every beam is scored: the place is then more likely wrong than cluttered (default {default}: twice
+        the 0.5 m within which the cloud counts as agreed, more than its own error explains; 0 scores every
+        beam). Example: --short-beams 0"""),
     FilterOption("--occupied-penalty", _penalty, metavar="NATS", help="""
         a particle standing in one of the map's obstacles loses NATS of log-likelihood at each update (default
         {default}: a pose in a wall is e^-5, about 150 times, less likely than one in free space with the same
@@ -1112,7 +1130,7 @@ def run_kwargs(args: argparse.Namespace, grid: OccupancyGrid | None = None) -> d
         min_range=args.min_range, kld=kld, augmented=aug, recovery_injection=args.recovery,
         restart_after=max(int(args.restart_after), 0), min_ess=args.min_ess,
         unknown_allowed=True, unknown_penalty=DEFAULTS["unknown_penalty"], expand=tuple(args.expand),
-        unknown_beams=args.unknown_beams, z_short=args.z_short, occupied_penalty=args.occupied_penalty,
+        unknown_beams=args.unknown_beams, short_beams=args.short_beams, z_short=args.z_short, occupied_penalty=args.occupied_penalty,
         odometry_sign=args.odometry_sign,
     )
 

@@ -251,7 +251,10 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
         The passes (the backward one turned into scan order by :func:`reverse_trace`).
     fit : callable ``fit(poses, scans) -> (n,)``, optional
         Scan fit of a pose at a scan (:func:`scan_fit_function`) to settle
-        disagreements; without it, the pass localized longer wins.
+        disagreements; without it, the pass localized longer wins. A pass
+        still *searching* at a scan (never localized so far in its own time
+        direction) is never compared there: its estimate is the best of a
+        fresh cloud on the few scans it has seen, and fits them by selection.
     agree_distance, agree_heading : float
         Two localized estimates closer than this (metres, radians) agree.
     odometry : array_like (T, 3), optional
@@ -383,7 +386,10 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
         # while the other one's cloud already leans to the right place. No claim there; the better estimate.
         for who, other in (("forward", "backward"), ("backward", "forward")):
             mine_p, other_p = (pf, pb) if who == "forward" else (pb, pf)
-            for a, b in _intervals((passes == who) & ~distrusted):
+            # a pass still searching (never localized so far in its own time direction) has no place to offer:
+            # its estimate is the best of a fresh cloud on the few scans it has seen, and fits them by selection
+            other_searching = (backward if who == "forward" else forward).state == "searching"
+            for a, b in _intervals((passes == who) & ~distrusted & ~other_searching):
                 scans = np.arange(a, b + 1)
                 fm, fo = fit(mine_p[scans], scans), fit(other_p[scans], scans)
                 ok = np.isfinite(fm) & np.isfinite(fo)
@@ -414,6 +420,8 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
         diff = np.zeros(t)
         with np.errstate(invalid="ignore"):
             dk = fit(pb[ks], ks) - fit(pf[ks], ks)
+        # ... between places only: a pass still searching there is not compared (see the overruling above)
+        dk[(forward.state[ks] == "searching") | (backward.state[ks] == "searching")] = np.nan
         diff[ks] = np.where(np.isfinite(dk), dk, 0.0)
         for a, b in _intervals(none):
             seg = diff[a:b + 1]
@@ -422,6 +430,9 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
             sm = c[np.minimum(i + 3, seg.size)] - c[np.maximum(i - 2, 0)]       # sum over scans i-2 .. i+2
             decided = np.abs(sm) > 1e-9
             b_none[a:b + 1] = np.where(decided, sm > 0, b_none[a:b + 1])
+        f_search, b_search = forward.state == "searching", backward.state == "searching"
+        b_none[none & b_search & ~f_search] = False     # the scans never choose a place a pass has not found yet
+        b_none[none & f_search & ~b_search] = True
     take_b = (source == "backward") | b_none
     poses[take_b], stds[take_b], spread[take_b] = pb[take_b], backward.stds[take_b], backward.spread[take_b]
     if agree.any():

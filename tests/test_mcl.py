@@ -872,17 +872,94 @@ class _RecordingField:
 
 
 def test_skip_unknown_beams_leaves_out_exactly_the_beams_that_end_in_unknown_cells():
-    from localize.mcl import _skip_unknown_beams
+    from localize.mcl import _skip_beams
 
     g = _office_with_unknown_east(6.5)
     f = MCL.gaussian([5.0, 5.5, 0.0], (1e-6, 1e-6, 1e-6), 50, (0.0,) * 4, XYSensor(), rng=np.random.default_rng(0))
     angles = np.array([0.0, np.pi, np.pi / 2, 0.0, 0.0])
     ranges = np.array([2.5, 2.5, 0.5, 8.0, 1.0])      # east into unknown, west, north, no return, east but short
-    z, n = _skip_unknown_beams(g, f, np.zeros(3), (ranges, angles), 8.0)
-    assert n == 1
+    z, n, n_short = _skip_beams(g, f, np.zeros(3), (ranges, angles), 8.0)
+    assert (n, n_short) == (1, 0)
     np.testing.assert_array_equal(z[0], [8.0, 2.5, 0.5, 8.0, 1.0])
     np.testing.assert_array_equal(z[1], angles)
     assert ranges[0] == 2.5                           # the caller's scan is not changed
+
+
+def test_skip_short_beams_leaves_out_the_beams_that_read_well_short_of_the_map():
+    """From (5, 5.5) facing east in the office the map's walls are 5.8 m east, 4.8 m west, 0.9 m north: a
+    reading 2.8 m short of the east wall is left out, one 0.1 m short (the pose's own error) is kept; when
+    most of the scan reads short, nothing is left out."""
+    from localize.mcl import SHORT_BEAMS_MAX_SHARE, _skip_beams
+    from localize.raycast import RayCaster
+
+    g = office()
+    caster = RayCaster(g, 8.0, method="march")
+    f = MCL.gaussian([5.0, 5.5, 0.0], (1e-6, 1e-6, 1e-6), 50, (0.0,) * 4, XYSensor(), rng=np.random.default_rng(0))
+    expected = caster.cast(np.array([[5.0, 5.5, 0.0]]), np.array([0.0, np.pi, np.pi / 2]))[0]
+    np.testing.assert_allclose(expected, [5.8, 4.8, 0.9], atol=0.06)
+    angles = np.array([0.0, 0.0, np.pi, np.pi / 2, 0.0])
+    ranges = np.array([5.7, 3.0, 4.8, 0.9, 8.0])      # east (a little short), east (2.8 m short), west, north, none
+    z, n, n_short = _skip_beams(g, f, np.zeros(3), (ranges, angles), 8.0, caster=caster, short=1.0)
+    assert (n, n_short) == (0, 1)
+    np.testing.assert_array_equal(z[0], [5.7, 8.0, 4.8, 0.9, 8.0])
+    assert ranges[1] == 3.0                           # the caller's scan is not changed
+    z, n, n_short = _skip_beams(g, f, np.zeros(3), (ranges, angles), 8.0, caster=caster, short=3.0)
+    assert n_short == 0                               # 2.8 m short is within a 3 m margin
+    # three of the four valid beams read short: the place is more likely wrong than cluttered
+    most = np.array([3.0, 3.0, 2.0, 0.9, 8.0])
+    assert 3 > SHORT_BEAMS_MAX_SHARE * 4
+    z, n, n_short = _skip_beams(g, f, np.zeros(3), (most, angles), 8.0, caster=caster, short=1.0)
+    assert n_short == 0 and np.array_equal(z[0], most)
+
+
+def _corridor(panel_at: float | None = None):
+    """A corridor 20 m long and 4 m wide (x 0..20, y -2..2), closed at both ends; with ``panel_at``, a panel
+    across it at that x (something the map does not show)."""
+    from localize.grid import OccupancyGrid
+
+    data = np.zeros((40, 220))
+    data[0, :] = data[-1, :] = 1.0
+    data[:, 0] = data[:, 200:] = 1.0
+    if panel_at is not None:
+        data[:, int(round(panel_at / 0.1))] = 1.0
+    return OccupancyGrid(data, 0.1, origin=(0.0, -2.0))
+
+
+def test_run_filter_skip_short_beams_keeps_an_agreed_cloud_that_unmapped_clutter_would_pull_away():
+    """A robot at x = 10 m of a corridor faces a panel at x = 18 m that the map does not show. Scored, the
+    beams on it fit a few particles 2 m further on (where they would end on the mapped end wall) perfectly,
+    and those take all the weight at once; left out as reading 2 m short of the map at the agreed place,
+    the cloud stays with the robot."""
+    from localize.mcl import StateRules, run_filter
+    from localize.raycast import RayCaster
+    from localize.sensors import LikelihoodField
+
+    g = _corridor()
+    angles = np.radians(np.arange(-90, 91, 10.0))
+    scan = RayCaster(_corridor(18.0), 15.0, method="exact").cast(np.array([[10.0, 0.0, 0.0]]), angles)[0]
+    ahead = np.abs(angles) < np.radians(15)
+    np.testing.assert_allclose(scan[ahead], 8.0, atol=0.15)               # the panel, not the wall at 10 m
+    sides = (np.where(np.abs(angles) > np.radians(30), scan, 15.0), angles)   # first: the side walls only
+    rules = StateRules(hold=1, min_fit=0.0, restart_fit=0.0, probe_shift=0.0, min_beams=1)
+    scans = [sides] + [(scan, angles)] * 4
+    out = {}
+    for short in (1.0, 0.0):
+        rng = np.random.default_rng(3)
+        f = MCL.gaussian([10.0, 0.0, 0.0], (0.03, 0.03, 0.01), 300, (0.0,) * 4,
+                         LikelihoodField(g, 15.0, sigma_hit=0.2), rng=rng)
+        stray = np.column_stack([rng.normal(12.0, 0.03, 10), rng.normal(0.0, 0.03, 10), np.zeros(10)])
+        f.particles = np.vstack([f.particles, stray])
+        f.log_weights = np.full(310, -np.log(310))
+        out[short] = run_filter(f, 5, lambda k: None, lambda k: scans[k], grid=g, rules=rules,
+                                skip_short_beams=short)
+    kept, pulled = out[1.0], out[0.0]
+    assert np.all(np.abs(kept.poses[:, 0] - 10.0) < 0.2)
+    assert any(f"{3 * 4} beams that read more than 1 m shorter" in t for _, t in kept.events)
+    assert np.all(np.abs(pulled.poses[1:, 0] - 12.0) < 0.1)           # the look-alike took it at the first scan
+    assert not any("shorter" in t for _, t in pulled.events)
+    with pytest.raises(ValueError, match="skip_short_beams must be a length in metres"):
+        run_filter(MCL.gaussian([10.0, 0.0, 0.0], (0.03,) * 3, 10, (0.0,) * 4, XYSensor(), rng=np.random.default_rng(0)), 1, lambda k: None,
+                   lambda k: None, skip_short_beams=-1.0)
 
 
 def test_run_filter_skips_unknown_beams_only_once_the_cloud_agrees():

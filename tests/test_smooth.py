@@ -147,7 +147,7 @@ def test_a_disagreement_goes_to_the_pass_whose_estimates_fit_the_scans():
 
 
 def test_a_lone_pass_is_overruled_where_the_other_passs_estimate_fits_the_scans_clearly_better():
-    t = 20
+    t = 30
     right = np.tile([1.0, 2.0, 0.0], (t, 1))
     wrong = np.tile([8.0, 2.0, 0.0], (t, 1))
     noise = np.random.default_rng(2).normal(0, 0.02, t)
@@ -155,21 +155,31 @@ def test_a_lone_pass_is_overruled_where_the_other_passs_estimate_fits_the_scans_
     def fit(poses, scans):                   # the scans fit the right place at 0.8, the wrong one at 0.6
         return np.where(np.asarray(poses)[:, 0] < 4, 0.8, 0.6) + noise[np.asarray(scans)]
 
-    # forward: right and localized, then lost, then re-localized at a look-alike place for the last 6 scans, where
-    # the backward pass (its own start) is still searching, its cloud's mean already at the right place
-    f = _trace(np.vstack([right[:10], wrong[10:]]), ["localized"] * 10 + ["lost"] * 4 + ["localized"] * 6)
-    b = _trace(right, ["localized"] * 12 + ["searching"] * 8)
+    # forward: right and localized, then lost, then re-localized at a look-alike place (scans 14-19), then right
+    # again; the backward pass, right throughout, is lost at 12-19 (localized on both sides), its estimate still at
+    # the right place
+    f = _trace(np.vstack([right[:10], wrong[10:20], right[20:]]),
+               ["localized"] * 10 + ["lost"] * 4 + ["localized"] * 16)
+    b = _trace(right, ["localized"] * 12 + ["lost"] * 8 + ["localized"] * 10)
     s = smooth.combine(f, b, fit)
-    assert list(s.passes[14:]) == ["forward"] * 6
-    assert list(s.state[14:]) == ["lost"] * 6 and np.allclose(s.poses[14:, 0], 1.0)   # no claim; the better estimate
+    assert list(s.passes[14:20]) == ["forward"] * 6
+    assert list(s.state[14:20]) == ["lost"] * 6 and np.allclose(s.poses[14:20, 0], 1.0)   # no claim; the better one
     (o,) = s.summary()["overruled"]
     assert o["scans"] == [14, 19] and o["pass"] == "forward" and o["fit_backward"] > o["fit_forward"]
     assert "overruled on scans 14-19 (forward)" in smooth.headline(s.summary())
     # a lone pass whose place fits at least as well as the other's estimate keeps its claim
-    s2 = smooth.combine(_trace(right, ["localized"] * 10 + ["lost"] * 4 + ["localized"] * 6), b, fit)
-    assert list(s2.state[14:]) == ["localized"] * 6 and s2.summary()["overruled"] == []
+    s2 = smooth.combine(_trace(right, f.state), b, fit)
+    assert list(s2.state[14:20]) == ["localized"] * 6 and s2.summary()["overruled"] == []
     # without a fit function nothing can overrule
-    assert list(smooth.combine(f, b).state[14:]) == ["localized"] * 6
+    assert list(smooth.combine(f, b).state[14:20]) == ["localized"] * 6
+    # a pass still *searching* there (the backward pass's own start: never localized so far in its time) has no
+    # place to offer: its estimate is the best of a fresh cloud on the few scans it has seen, which it fits by
+    # selection, and it overrules nothing however well it fits
+    t2 = 20
+    f3 = _trace(np.vstack([right[:10], wrong[10:t2]]), ["localized"] * 10 + ["lost"] * 4 + ["localized"] * 6)
+    b3 = _trace(right[:t2], ["localized"] * 12 + ["searching"] * 8)
+    s3 = smooth.combine(f3, b3, fit)
+    assert s3.summary()["overruled"] == [] and list(s3.state[14:]) == ["localized"] * 6
 
 
 def test_a_disagreement_the_scans_cannot_settle_is_not_localized():
@@ -342,18 +352,23 @@ def test_with_odometry_a_losing_pass_is_distrusted_only_while_it_follows_its_wro
 
 
 def test_where_neither_pass_is_localized_the_better_fitting_estimate_is_used():
-    t = 9
+    t = 12
     p = np.zeros((t, 3))
-    f = _trace(p, ["searching"] * 3 + ["localized"] * 3 + ["lost"] * 3)
-    b = _trace(p + [5.0, 0, 0], ["localized"] * 2 + ["searching"] * 7)
+    f = _trace(p, ["searching"] * 3 + ["localized"] * 3 + ["lost"] * 6)
+    # backward: localized at 9-11 (its start), lost at 2-8, localized again at 0-1
+    b = _trace(p + [5.0, 0, 0], ["localized"] * 2 + ["lost"] * 7 + ["localized"] * 3)
 
     def fit(poses, scans):                                    # the backward pass's place fits the scans
         return np.where(np.asarray(poses)[:, 0] > 4, 0.9, 0.3)
 
     s = smooth.combine(f, b, fit)
-    assert s.passes[2] == "none" and s.poses[2, 0] == 5.0          # a one-scan stretch
-    assert list(s.passes[6:]) == ["none"] * 3 and np.allclose(s.poses[6:, 0], 5.0)
-    assert list(s.state[6:]) == ["lost"] * 3                       # still honest: neither pass is localized
+    assert s.passes[2] == "none" and s.poses[2, 0] == 5.0          # forward has found no place yet there
+    assert list(s.passes[6:9]) == ["none"] * 3 and np.allclose(s.poses[6:9, 0], 5.0)   # both lost: the scans decide
+    assert list(s.state[6:9]) == ["lost"] * 3                      # still honest: neither pass is localized
+    # a pass still searching is not compared: the estimate is the other pass's, however well the fresh one fits
+    b2 = _trace(p + [5.0, 0, 0], ["localized"] * 2 + ["searching"] * 10)
+    s2 = smooth.combine(f, b2, fit)
+    assert list(s2.passes[6:]) == ["none"] * 6 and np.allclose(s2.poses[6:, 0], 0.0)
 
 
 @pytest.mark.data

@@ -545,6 +545,25 @@ plt.show()
 #   than the robot's pose. Driving through the region a map leaves unknown,
 #   scan after scan of such small wins pulled the cloud more than a metre out
 #   of it. AMCL has no such rule; `--unknown-beams score` scores every beam.
+# * **`--short-beams 1`** — once the cloud has agreed on one place, a beam that
+#   reads more than 1 m *shorter* than the map's wall as ray-cast from that
+#   place is left out of the update too: it hit something the map does not
+#   show. The short-reading floor makes such a beam cost the true pose little,
+#   but it still pays a few particles at a wrong place where its end point
+#   happens to lie on a mapped wall. A robot blocked by clutter stands close to
+#   it and turns on the spot, most of its scan on the clutter, and a handful of
+#   particles 1–2 m away can take all of the weight in two updates (the test
+#   `test_run_filter_skip_short_beams_keeps_an_agreed_cloud_that_unmapped_clutter_would_pull_away`
+#   builds the simplest case: a panel across a corridor). The margin is twice
+#   the 0.5 m spread within which the cloud counts as agreed, more than its own
+#   error explains. When more than half of a scan reads short, every beam is
+#   scored: a place where most of the scan contradicts the map is more likely
+#   wrong than cluttered, and the scan must be free to move the cloud. ROS
+#   AMCL's beam skipping (`do_beamskip`, off by default) is a vote of the whole
+#   cloud: it leaves out the beams whose end point lies near a mapped wall for
+#   at most 30% of the particles, and scores every beam when 90% of them would
+#   go. This rule asks the map at the one agreed place instead.
+#   `--short-beams 0` scores every beam.
 # * **`--expand M RAD`, off by default** — expansion resetting (Ueda et al.
 #   2004): when the cloud agrees on a place but the scan just used does not fit
 #   the map there, every particle is moved by Gaussian noise of M metres and RAD
@@ -647,8 +666,8 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 
 # %% [markdown]
 # The target of the issue that asked for this benchmark — 95% success on every
-# log — is reached on the four real logs, Intel (100%), Freiburg 079 (97%),
-# ACES (100%) and CSAIL (98%), and not on the simulated Willow runs (88%).
+# log — is reached: Intel (100%), Freiburg 079 (97%), ACES (98%), CSAIL (97%)
+# and the simulated Willow runs (95%), with the least to spare on Willow.
 # Each default named above is there for one of these failures. The map-sized
 # initial cloud is for ACES, where a fixed cloud of 50,000 particles, started
 # in a stretch of the building that looks the same in several places, often
@@ -656,10 +675,23 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # end in unknown cells once the cloud agrees is for the runs whose robot
 # drives through the square that the degraded map leaves unknown: without it
 # they failed at every seed, because the cloud was pulled out of the square.
+# Leaving out the beams that read well short of the map once the cloud agrees
+# is for Willow too: with `--short-beams 0` (section
+# `bench_global_short_beams_0`) Willow succeeds in 88% instead of 95%. The
+# four runs it turns into successes are the failure it was made for: a
+# correct, tight cloud that lost all of its weight, within one or two updates,
+# to a few particles 1–2 m away while the robot stood close to clutter; on
+# the four real logs it changes the success of one or two runs either way
+# (ACES 100% and CSAIL 98% without it). It costs some confidence: 270 of the
+# 300 runs end "localized" with it, 276 without (the table's "ended
+# localized" column). The runs that now end "lost" end within 0.15 m of the
+# robot, in a stretch where the scans fit the map poorly; they say so, they
+# are not wrong.
 # The short-reading floor is for unmapped clutter. The same runs with
 # `--z-short 0` (the section `bench_global_z_short_0` of
-# `benchmarks/RESULTS.md`) succeed on Willow in 67% instead of 88% and on
-# ACES in 90% instead of 100% (on Intel, Freiburg and CSAIL equally often). Willow's simulated robot drives among ten
+# `benchmarks/RESULTS.md`) succeed on Willow in 77% instead of 95% and on
+# ACES in 95% instead of 98% (on Intel and Freiburg equally often, on CSAIL in
+# 98% instead of 97%). Willow's simulated robot drives among ten
 # unmapped objects per run, and their beams end short of the mapped walls. The odometry check is for
 # Freiburg. With `--odometry-sign trust` (section
 # `bench_global_odometry_sign_trust`) Freiburg succeeds in 87% instead of 97%,
@@ -686,14 +718,21 @@ if section:
         ok, runs = cells[2].split()[0].split("/")
         rows[name] = dict(success=int(ok) / int(runs), off=int(cells[9]))
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rows), sorted(rows)
-    claims = {"intel": 1.0, "freiburg-079": 0.97, "aces": 1.0, "csail": 0.98, "willow": 0.88}
+    claims = {"intel": 1.0, "freiburg-079": 0.97, "aces": 0.98, "csail": 0.97, "willow": 0.95}
     for log_name, rate in claims.items():
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
-    assert sorted(n for n, r in rows.items() if r["success"] >= 0.95) == ["aces", "csail", "freiburg-079", "intel"]
+    assert all(r["success"] >= 0.95 for r in rows.values()), rows
     assert all(r["off"] == 0 for r in rows.values())
+    scored = {name: cells[2].split()[0]
+              for name, cells in table_rows(results_section("bench_global_short_beams_0")).items()}
+    assert scored == {"intel": "60/60", "freiburg-079": "58/60", "aces": "60/60", "csail": "59/60",
+                      "willow": "53/60"}, scored
+    ended = [sum(int(cells[8]) for cells in table_rows(results_section(name)).values())
+             for name in ("bench_global", "bench_global_short_beams_0")]
+    assert ended == [270, 276], ended
     without = {name: cells[2].split()[0] for name, cells in table_rows(results_section("bench_global_z_short_0")).items()}
-    assert without == {"intel": "60/60", "freiburg-079": "58/60", "aces": "54/60", "csail": "59/60",
-                       "willow": "40/60"}, without
+    assert without == {"intel": "60/60", "freiburg-079": "58/60", "aces": "57/60", "csail": "59/60",
+                       "willow": "46/60"}, without
     trusted = table_rows(results_section("bench_global_odometry_sign_trust"))["freiburg-079"][2].split()[0]
     assert trusted == "52/60", trusted
 
@@ -704,6 +743,7 @@ assert abs(cli.auto_particles(OccupancyGrid(np.zeros((400, 130)), 0.1)) - 75_000
 d = cli.DEFAULTS                                                     # the defaults the text names
 assert (d["sigma_hit"], d["temper"], d["z_short"], d["beams"], d["min_range"]) == (0.2, 0.3, 0.2, 30, 0.05), d
 assert (d["odometry_sign"], d["occupied_penalty"], d["restart_after"]) == ("auto", 5.0, 5), d
+assert d["short_beams"] == 1.0 and d["unknown_beams"] == "skip", d
 
 # %% [markdown]
 # On speed (`benchmarks/bench_cli.py`): a CMU-sized log — 700 scans of 180
@@ -1049,13 +1089,17 @@ plt.show()
 # On the benchmark's logs and degraded maps (`benchmarks/bench_smooth.py`: the
 # same runs as `bench_global`, 20 starts x 2 seeds per data set, each
 # trajectory judged by bench_global's rule), the forward pass alone now
-# succeeds in 194 of 200 runs, and smoothing does not add to that: it turns 4
-# failures into successes and 6 successes into failures (192 of 200). What it
-# adds is the share of each log that is localized — 95% of the scans instead
-# of 86% — because the backward pass localizes the start that the forward
-# pass spends searching, and fewer wrong claims: no smoothed run has a scan
-# called localized while more than 1 m off, against 4 forward runs (the
-# table's next-to-last column). It cannot help where both passes go wrong at the same place, and
+# succeeds in 196 of 200 runs, and smoothing does not add to that: it turns 4
+# failures into successes and 4 successes into failures (196 of 200). What it
+# adds is the share of each log that is localized — 94% of the scans instead
+# of 85% — because the backward pass localizes the start that the forward
+# pass spends searching. Two smoothed runs (Freiburg from scan 236, at both
+# seeds) call scans localized while more than 1 m off, against three forward
+# runs (the table's next-to-last column). Where one pass is still *searching*
+# (the backward pass near the log's end, the forward pass near its start), its
+# estimate is never preferred to the other pass's: it is the best place of a
+# fresh cloud for the few scans it has seen, so it fits those scans by
+# selection. It cannot help where both passes go wrong at the same place, and
 # a pass that is wrong with confidence can
 # still win a stretch. It is an
 # offline tool: it needs the whole log and takes more than twice the time
@@ -1069,9 +1113,10 @@ print(section or "benchmarks/RESULTS.md has no bench_smooth section yet")
 # %% tags=["remove-cell"]
 if section:
     every = table_rows(section)["all"]
-    assert every[2].startswith("194/200") and every[3].startswith("192/200"), every
-    assert (every[4], every[5]) == ("4", "6"), every
-    assert every[6] == "86% / 95%" and every[8] == "4 / 0", every
+    assert every[2].startswith("196/200") and every[3].startswith("196/200"), every
+    assert (every[4], every[5]) == ("4", "4"), every
+    assert every[6] == "85% / 94%" and every[8] == "3 / 2", every
+    assert table_rows(section)["freiburg-079"][8] == "0 / 2", table_rows(section)["freiburg-079"]
     seconds = [float(v) for v in every[9].split("/")]
     assert seconds[1] > 2 * seconds[0], every          # "more than twice the time of one pass"
 
