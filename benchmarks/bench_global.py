@@ -173,10 +173,21 @@ def willow_log(world: OccupancyGrid, n_scans: int, rng: np.random.Generator):
                        max_range=run.max_range, poses=run.poses, source="willow-sim", format="sim")
 
 
-def start_scans(n_log: int, n_scans: int, n_starts: int) -> list[int]:
-    """``n_starts`` start scans spread evenly over a log, leaving ``n_scans`` after the last where it can."""
+def start_scans(n_log: int, n_scans: int, n_starts: int, held_out: bool = False) -> list[int]:
+    """``n_starts`` start scans spread evenly over a log, leaving ``n_scans`` after the last where it can.
+
+    ``held_out`` gives ``n_starts`` other scans, each between two of the standard ones: the midpoints of
+    the standard spacing, and a quarter of the way to the second start.
+    """
     last = max(n_log - n_scans, 0)
+    if held_out:
+        step = last / max(n_starts - 1, 1)
+        return sorted({int(round(v)) for v in [*(step * (k + 0.5) for k in range(n_starts - 1)), step / 4]})
     return sorted({int(round(v)) for v in np.linspace(0, last, n_starts)})
+
+
+HELD_OUT = 1000
+"""First Willow world and first seed of ``--held-out`` (the standard draw uses 0, 1, 2, ...)."""
 
 
 # ------------------------------------------------------------------ one run
@@ -306,6 +317,9 @@ def main(argv=None) -> int:
     ap.add_argument("--args", default="", metavar="'OPTIONS'",
                     help="options of `localize run` for every run (experiments), e.g. --args '--particles 20000'")
     ap.add_argument("--clean-map", action="store_true", help="diagnostics: localize on the undegraded map")
+    ap.add_argument("--held-out", action="store_true",
+                    help="a second, independent draw that no default was chosen on: other start scans (between "
+                         "the standard ones), so other map degradations, other Willow worlds and other seeds")
     ap.add_argument("--write", action="store_true", help="write the bench_global section of RESULTS.md")
     ap.add_argument("--section", default="bench_global", metavar="NAME",
                     help="the section --write writes (default bench_global); an experiment with --set or --args "
@@ -315,8 +329,8 @@ def main(argv=None) -> int:
     ap.add_argument("--table-from", type=Path, default=None, metavar="FILE",
                     help="do not run: print the table of the runs stored in FILE by --json (e.g. of a run cut short)")
     args = ap.parse_args(argv)
-    if args.write and (args.set or args.args or args.clean_map) and args.section == "bench_global":
-        ap.error("--write with --set, --args or --clean-map needs --section NAME: the bench_global section is "
+    if args.write and (args.set or args.args or args.clean_map or args.held_out) and args.section == "bench_global":
+        ap.error("--write with --set, --args, --clean-map or --held-out needs --section NAME: the bench_global section is "
                  "the table of the defaults")
     opts = {}
     for kv in args.set:
@@ -336,13 +350,14 @@ def main(argv=None) -> int:
     jobs = []
     for n in names:
         log, _ = load(n)
-        starts = list(range(args.starts)) if n == "willow" else start_scans(len(log), args.scans, args.starts)
+        base = HELD_OUT if args.held_out else 0
+        starts = (list(range(base, base + args.starts)) if n == "willow"
+                  else start_scans(len(log), args.scans, args.starts, held_out=args.held_out))
         jobs += [{"name": n, "start": s, "seed": seed, "scans": args.scans, "opts": opts, "clean": args.clean_map,
-                  "args": args.args.split()}
-                 for s in starts for seed in range(args.seeds)]
+                  "args": args.args.split(), "order": i}
+                 for i, s in enumerate(starts) for seed in range(base, base + args.seeds)]
     # interleave the logs, so that a run stopped early still covers every log
-    jobs.sort(key=lambda j: (j["seed"], j["start"] if j["name"] == "willow" else
-                             start_scans(len(load(j["name"])[0]), args.scans, args.starts).index(j["start"]), j["name"]))
+    jobs.sort(key=lambda j: (j["seed"], j["order"], j["name"]))
     t1 = time.perf_counter()
     rows = []
     sink = open(args.json, "w") if args.json else None
@@ -375,7 +390,8 @@ def main(argv=None) -> int:
         f"## {args.section}",
         "",
         f"Global localization with the CLI defaults{' except the overrides named at the end' if opts or args.args else ''} on degraded maps (walls +0.10-0.15 m, obstacles added and "
-        f"removed, a region unknown), raw odometry; {args.starts} starts x {args.seeds} seeds per log, runs of "
+        f"removed, a region unknown), raw odometry; {args.starts} starts x {args.seeds} seeds per log"
+        f"{' (the held-out draw: other starts, degradations, Willow worlds and seeds)' if args.held_out else ''}, runs of "
         f"{args.scans} scans or to the end of the log. Success: within {SUCCESS_M} m and 10 deg of the reference "
         f"within the first {WITHIN:.0%} of the run, within {STAY_M} m after. `{cmd.strip()}`; "
         f"{len(jobs)} runs on {args.workers} processes in {wall / 60:.1f} min (+{t_load:.0f} s reading and mapping)."
