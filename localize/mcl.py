@@ -51,7 +51,7 @@ from .geometry import relative as _relative
 from .grid import OccupancyGrid
 from .kld import KLDSampling, kld_sample_size
 from .motion import OdometryMotion, ReversibleOdometry, VelocityMotion  # noqa: F401  (re-exported: their old home)
-from .sensors import sensor_poses
+from .sensors import select_beams, sensor_poses
 
 __all__ = [
     "MCL",
@@ -1193,8 +1193,9 @@ class StateRules:
 
     * the scan *pins* the pose: moved by ``probe_shift`` metres forwards,
       backwards, left or right, the estimate must fit the scan worse by at
-      least ``min_contrast`` nats per valid beam (untempered log-likelihood
-      of the sensor model). In a featureless corridor a cloud can shrink
+      least ``min_contrast`` nats per beam the sensor model scored
+      (untempered log-likelihood; beams left out of the update and beams
+      the model thins away are not counted). In a featureless corridor a cloud can shrink
       onto one stretch by resampling alone (KLD-sampling makes it small
       enough for that), and every stretch fits equally well; this probe
       says so. (Range scans and sensors with ``log_likelihood`` only.)
@@ -1790,7 +1791,7 @@ def run_filter(
                          and (fit_s >= rules.min_fit * fit_expected if np.isfinite(fit_s) else
                               cur == "localized" or grid is None or not _is_scan(z)))
             if confident and rules.probe_shift > 0 and _is_scan(z) and n_valid[k] > 0:
-                confident = _pinned(sensor, pose, z, rules.probe_shift, rules.min_contrast, int(n_valid[k]))
+                confident = _pinned(sensor, pose, z, rules.probe_shift, rules.min_contrast, lo_r, hi_r)
             if confident:
                 good += 1
                 bad = 0
@@ -1917,12 +1918,18 @@ def _probation(mcl: MCL, trial: dict, events: list, k: int, injection: float) ->
     return trial
 
 
-def _pinned(sensor: Any, pose: NDArray, z: tuple, shift: float, min_contrast: float, n_valid: int) -> bool:
+def _pinned(sensor: Any, pose: NDArray, z: tuple, shift: float, min_contrast: float, lo_r: float = 0.0,
+            hi_r: float = np.inf) -> bool:
     """Whether the scan ``z`` fits ``pose`` better than ``pose`` moved by ``shift`` in any of four directions.
 
-    The contrast is the drop of the sensor model's log-likelihood per valid
-    beam (the model's tempering undone); the pose is pinned when the smallest
-    drop is at least ``min_contrast``.
+    The contrast is the drop of the sensor model's log-likelihood per beam it
+    scored (the model's tempering undone); the pose is pinned when the
+    smallest drop is at least ``min_contrast``. The beams counted are those the
+    sensor scores: of the ``max_beams`` it thins a scan to (if it does), the
+    readings in ``(lo_r, hi_r)`` -- a beam left out of the update (set to the
+    maximum range by :func:`_skip_beams`) adds nothing to the drop, so it does
+    not dilute it either, and a 1081-beam scan read by a 30-beam model is
+    judged as the 30 beams it is.
     """
     c, s = np.cos(pose[2]), np.sin(pose[2])
     d = np.array([[0.0, 0.0], [shift, 0.0], [-shift, 0.0], [0.0, shift], [0.0, -shift]])
@@ -1933,8 +1940,12 @@ def _pinned(sensor: Any, pose: NDArray, z: tuple, shift: float, min_contrast: fl
         ll = np.asarray(sensor.log_likelihood(probes, *z), dtype=float)
     if ll.shape != (5,) or not np.isfinite(ll[0]):
         return True                    # cannot probe: leave the decision to the other rules
+    r = np.asarray(z[0], dtype=float).ravel()
+    r = r[select_beams(r.size, getattr(sensor, "max_beams", None))]
+    with np.errstate(invalid="ignore"):
+        n_scored = int(np.sum(np.isfinite(r) & (r > lo_r) & (r < hi_r)))
     temper = float(getattr(sensor, "temper", 1.0) or 1.0)
-    contrast = (ll[0] - np.max(np.where(np.isfinite(ll[1:]), ll[1:], -np.inf))) / (temper * max(n_valid, 1))
+    contrast = (ll[0] - np.max(np.where(np.isfinite(ll[1:]), ll[1:], -np.inf))) / (temper * max(n_scored, 1))
     return bool(contrast >= min_contrast)
 
 

@@ -912,6 +912,48 @@ def test_skip_short_beams_leaves_out_the_beams_that_read_well_short_of_the_map()
     assert n_short == 0 and np.array_equal(z[0], most)
 
 
+def test_the_probe_counts_the_beams_the_sensor_scored():
+    """The probe's contrast is per beam the sensor model scored: a 361-beam scan read by a model that thins
+    it to 31 beams, and a scan whose beams were left out of the update (set to the maximum range), are
+    judged as the beams that were scored -- dividing by every valid reading made the contrast 12x (or 2x)
+    too small, so a pose the scan pins would never be called localized."""
+    from localize.mcl import _pinned
+    from localize.raycast import RayCaster
+    from localize.sensors import LikelihoodField, select_beams
+
+    g = office()
+    pose = np.array([5.0, 5.5, 0.3])
+    angles = np.radians(np.linspace(-90, 90, 361))
+    ranges = RayCaster(g, 8.0, method="exact").cast(pose[None, :], angles)[0]
+    sel = select_beams(361, 31)
+    plain = LikelihoodField(g, 8.0, sigma_hit=0.2)
+    thinning = LikelihoodField(g, 8.0, sigma_hit=0.2, max_beams=31)
+    shift = 1.0
+    d = np.array([[shift, 0.0], [-shift, 0.0], [0.0, shift], [0.0, -shift]])
+    probes = np.tile(pose, (5, 1))
+    probes[1:, 0] += np.cos(pose[2]) * d[:, 0] - np.sin(pose[2]) * d[:, 1]
+    probes[1:, 1] += np.sin(pose[2]) * d[:, 0] + np.cos(pose[2]) * d[:, 1]
+
+    def contrast(sensor, r, a):
+        ll = sensor.log_likelihood(probes, r, a)
+        n = int(np.sum(r[select_beams(r.size, sensor.max_beams)] < 8.0))
+        return (ll[0] - ll[1:].max()) / n
+
+    c = contrast(plain, ranges[sel], angles[sel])
+    assert c > 0.05                                   # the office pins this pose
+    assert contrast(thinning, ranges, angles) == pytest.approx(c)
+    for factor, pinned in ((0.8, True), (1.25, False)):
+        assert _pinned(plain, pose, (ranges[sel], angles[sel]), shift, factor * c, 0.0, 8.0) is pinned
+        assert _pinned(thinning, pose, (ranges, angles), shift, factor * c, 0.0, 8.0) is pinned
+    # every other beam left out of the update: the contrast of the beams that were scored
+    half = ranges[sel].copy()
+    half[1::2] = 8.0
+    c_half = contrast(plain, half, angles[sel])
+    assert c_half == pytest.approx(contrast(plain, ranges[sel][::2], angles[sel][::2]))
+    assert _pinned(plain, pose, (half, angles[sel]), shift, 0.8 * c_half, 0.0, 8.0)
+    assert not _pinned(plain, pose, (half, angles[sel]), shift, 1.25 * c_half, 0.0, 8.0)
+
+
 def _corridor(panel_at: float | None = None):
     """A corridor 20 m long and 4 m wide (x 0..20, y -2..2), closed at both ends; with ``panel_at``, a panel
     across it at that x (something the map does not show)."""
