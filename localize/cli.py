@@ -840,7 +840,11 @@ FILTER_OPTIONS: tuple[FilterOption, ...] = (
         Example: --max-range 20"""),
     FilterOption("--alphas", _nonneg_float, 4, ("A1", "A2", "A3", "A4"), help="""
         odometry noise alpha1..alpha4 of Probabilistic Robotics table 5.6, as variances (default {default}).
-        Example: --alphas 0.1 0.02 0.05 0.1"""),
+        A step driven backwards is moved as a forward step of a robot facing the other way, and a step whose
+        translation lies within the translation noise of a turn on the spot, sqrt(A3*t^2 + A4*turn^2), gets
+        the noise of a turn on the spot (an odometry point off the robot's axis creeps sideways while it
+        turns; taken as a drive, that step would turn almost 90 degrees and scatter the particles by half a
+        metre). Example: --alphas 0.1 0.02 0.05 0.1"""),
     FilterOption("--sigma-hit", _positive_float, metavar="M", help="""
         standard deviation of a beam's end point about the nearest wall (likelihood field) or of a reading
         about the ray-cast range (beam model), metres (default {default}): the map's error sets it, not the

@@ -146,6 +146,30 @@ def test_freiburg_odometry_never_reports_backing_up(logs):
     assert (per_run[709], per_run[1182]) == (37, 50), per_run
 
 
+def test_freiburg_odometry_creeps_sideways_while_the_robot_turns_on_the_spot(logs):
+    """Chapter 9: in 117 of Freiburg's steps the odometry point moves a few millimetres *sideways* while the robot
+    turns (the corrected poses move 2 cm, median); as "turn towards the destination, drive, turn" (PR table 5.6)
+    those steps get rot1 near 90 degrees and a translation noise of about half a metre; ReversibleOdometry counts
+    them as turns on the spot, with a few centimetres (chapter 9's numbers)."""
+    from localize.motion import ReversibleOdometry, odometry_to_control, odometry_variances
+
+    log = logs["freiburg-079"]
+    move = ReversibleOdometry(cli.DEFAULTS["alphas"])
+    od = np.asarray(log.odometry)
+    s, c = relative(od[:-1], od[1:]), relative(log.poses[:-1], log.poses[1:])
+    t = np.hypot(s[:, 0], s[:, 1])
+    spot = np.array([move.min_trans < tt <= move.on_the_spot(tt, th) for tt, th in zip(t, s[:, 2])])
+    rot1, trans, rot2 = odometry_to_control(od[:-1], od[1:], move.min_trans)
+    sideways = spot & (np.minimum(np.abs(rot1), np.pi - np.abs(rot1)) > np.pi / 4)
+    assert sideways.sum() == 117, sideways.sum()                                   # chapter 9
+    assert np.median(t[sideways]) < 0.01 and np.median(np.hypot(*c[sideways, :2].T)) < 0.03
+    textbook = np.sqrt(odometry_variances(rot1, trans, rot2, cli.DEFAULTS["alphas"])[1][sideways])
+    on_spot = np.array([move.on_the_spot(tt, th) for tt, th in zip(t[sideways], s[sideways, 2])])
+    # "from about 0.46 m to about 3 cm"
+    assert abs(np.median(textbook) - 0.46) < 0.01 and abs(np.median(on_spot) - 0.03) < 0.002, (
+        np.median(textbook), np.median(on_spot))
+
+
 @pytest.mark.parametrize("name", list(LOGS))
 def test_the_scans_reverse_only_steps_in_which_the_robot_backed_up(shared_data, name):
     """--odometry-sign: on Freiburg (unsigned odometry) the scans reverse about 80 steps, every one of them a step

@@ -452,7 +452,20 @@ plt.show()
 # almost a metre forward while the corrected poses move backward — a filter
 # that trusts it loses the robot there. Recovery (chapter 8) finds it again;
 # better, the scans themselves say which way the robot went (`--odometry-sign`,
-# below).
+# below). A quieter surprise: while the Freiburg robot turns on the spot, its
+# odometry point, which lies a few centimetres off the axis the robot turns
+# about, creeps a few millimetres *sideways*. The odometry model of chapter 4
+# explains every step as "turn towards the destination, drive, turn", so it
+# reads such a step as a turn of almost 90 degrees, a drive of 5 mm and a turn
+# back, and its noise, which grows with the squared turns, scatters the
+# particles by about half a metre at every step of a turn that moved the robot
+# by two centimetres. The command line's odometry model
+# (`localize.motion.ReversibleOdometry`) counts a step whose translation lies
+# within the translation noise of a turn on the spot as a turn on the spot: the
+# particles move by the measured step, with the noise of a turn. In 117 of the
+# Freiburg log's steps this changes the noise from about 0.46 m to about 3 cm
+# (`tests/test_real_data.py`); a robot that turned at a wall for thirty scans
+# used to spread a correct cloud over two metres and lose it.
 #
 # ### Searching, localized, lost: what the filter can know
 #
@@ -666,7 +679,7 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 
 # %% [markdown]
 # The target of the issue that asked for this benchmark — 95% success on every
-# log — is reached: Intel (100%), Freiburg 079 (97%), ACES (98%), CSAIL (97%)
+# log — is reached: Intel (100%), Freiburg 079 (97%), ACES (100%), CSAIL (98%)
 # and the simulated Willow runs (95%), with the least to spare on Willow.
 # Each default named above is there for one of these failures. The map-sized
 # initial cloud is for ACES, where a fixed cloud of 50,000 particles, started
@@ -681,20 +694,20 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # four runs it turns into successes are the failure it was made for: a
 # correct, tight cloud that lost all of its weight, within one or two updates,
 # to a few particles 1–2 m away while the robot stood close to clutter; on
-# the four real logs it changes the success of one or two runs either way
-# (ACES 100% and CSAIL 98% without it). It costs some confidence: 270 of the
-# 300 runs end "localized" with it, 276 without (the table's "ended
-# localized" column). The runs that now end "lost" end within 0.15 m of the
-# robot, in a stretch where the scans fit the map poorly; they say so, they
-# are not wrong.
+# the four real logs it changes the success of one run (ACES 98% without
+# it). It costs a little confidence: 279 of the 300 runs end "localized" with
+# it, 281 without (the table's "ended localized" column). The runs that end
+# "lost" end near the robot, in a stretch where the scans fit the map poorly
+# (the note under the table in `benchmarks/RESULTS.md`); they say so, they are
+# not wrong.
 # The short-reading floor is for unmapped clutter. The same runs with
 # `--z-short 0` (the section `bench_global_z_short_0` of
 # `benchmarks/RESULTS.md`) succeed on Willow in 77% instead of 95% and on
-# ACES in 95% instead of 98% (on Intel and Freiburg equally often, on CSAIL in
-# 98% instead of 97%). Willow's simulated robot drives among ten
+# ACES in 95% instead of 100% (on Intel, Freiburg and CSAIL equally often).
+# Willow's simulated robot drives among ten
 # unmapped objects per run, and their beams end short of the mapped walls. The odometry check is for
 # Freiburg. With `--odometry-sign trust` (section
-# `bench_global_odometry_sign_trust`) Freiburg succeeds in 87% instead of 97%,
+# `bench_global_odometry_sign_trust`) Freiburg succeeds in 80% instead of 97%,
 # and the runs from start scans 709 and 1182 fail at every seed: the runs in
 # which the robot backs up most often (in 37 and 50 of their 300 steps) while
 # its odometry says forwards. The probation of a restart is for Willow, the
@@ -718,23 +731,23 @@ if section:
         ok, runs = cells[2].split()[0].split("/")
         rows[name] = dict(success=int(ok) / int(runs), off=int(cells[9]))
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rows), sorted(rows)
-    claims = {"intel": 1.0, "freiburg-079": 0.97, "aces": 0.98, "csail": 0.97, "willow": 0.95}
+    claims = {"intel": 1.0, "freiburg-079": 0.97, "aces": 1.0, "csail": 0.98, "willow": 0.95}
     for log_name, rate in claims.items():
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
     assert all(r["success"] >= 0.95 for r in rows.values()), rows
     assert all(r["off"] == 0 for r in rows.values())
     scored = {name: cells[2].split()[0]
               for name, cells in table_rows(results_section("bench_global_short_beams_0")).items()}
-    assert scored == {"intel": "60/60", "freiburg-079": "58/60", "aces": "60/60", "csail": "59/60",
+    assert scored == {"intel": "60/60", "freiburg-079": "58/60", "aces": "59/60", "csail": "59/60",
                       "willow": "53/60"}, scored
     ended = [sum(int(cells[8]) for cells in table_rows(results_section(name)).values())
              for name in ("bench_global", "bench_global_short_beams_0")]
-    assert ended == [270, 276], ended
+    assert ended == [279, 281], ended
     without = {name: cells[2].split()[0] for name, cells in table_rows(results_section("bench_global_z_short_0")).items()}
     assert without == {"intel": "60/60", "freiburg-079": "58/60", "aces": "57/60", "csail": "59/60",
                        "willow": "46/60"}, without
     trusted = table_rows(results_section("bench_global_odometry_sign_trust"))["freiburg-079"][2].split()[0]
-    assert trusted == "52/60", trusted
+    assert trusted == "48/60", trusted
 
 # %% tags=["remove-cell"]
 from localize.grid import OccupancyGrid  # noqa: E402
@@ -744,6 +757,37 @@ d = cli.DEFAULTS                                                     # the defau
 assert (d["sigma_hit"], d["temper"], d["z_short"], d["beams"], d["min_range"]) == (0.2, 0.3, 0.2, 30, 0.05), d
 assert (d["odometry_sign"], d["occupied_penalty"], d["restart_after"]) == ("auto", 5.0, 5), d
 assert d["short_beams"] == 1.0 and d["unknown_beams"] == "skip", d
+
+# %% [markdown]
+# A benchmark on which the defaults were chosen flatters them: each default
+# above was adopted because it fixed failures of these very runs. So the
+# benchmark has a second draw, `bench_global.py --held-out`, on which nothing
+# was chosen: other start scans (between the standard ones), and so other map
+# degradations, other Willow worlds and other seeds. Its table:
+
+# %%
+held_out = results_section("bench_global_held_out")
+print(held_out or "benchmarks/RESULTS.md has no bench_global_held_out section yet")
+
+# %% [markdown]
+# The four real logs reach 95% there too. The simulated Willow runs do not
+# (87%), and here the work is not finished: in most of the failed runs the
+# filter finds the robot, but only after the first 30% of the run. Where the
+# simulated robot starts inside the square that the degraded map leaves
+# unknown, or next to unmapped clutter, its first scans say nothing the map
+# can check, and the search settles on places whose beams end in the map's
+# unknown cells, which a likelihood field cannot rule out; the restart rules
+# above find the robot later. The note of that section in
+# `benchmarks/RESULTS.md` lists the failures. The honesty holds on this draw
+# as well: no run ended "localized" more than 1 m off.
+
+# %% tags=["remove-cell"]
+if held_out:
+    rates = {name: cells[2].split()[0] for name, cells in table_rows(held_out).items()}
+    assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rates), rates
+    assert all(int(r.split("/")[0]) >= 0.95 * int(r.split("/")[1]) for name, r in rates.items() if name != "willow"), rates
+    assert rates["willow"] == "52/60", rates                                  # 87%
+    assert all(int(cells[9]) == 0 for cells in table_rows(held_out).values())
 
 # %% [markdown]
 # On speed (`benchmarks/bench_cli.py`): a CMU-sized log — 700 scans of 180
@@ -1089,13 +1133,13 @@ plt.show()
 # On the benchmark's logs and degraded maps (`benchmarks/bench_smooth.py`: the
 # same runs as `bench_global`, 20 starts x 2 seeds per data set, each
 # trajectory judged by bench_global's rule), the forward pass alone now
-# succeeds in 196 of 200 runs, and smoothing does not add to that: it turns 4
-# failures into successes and 4 successes into failures (196 of 200). What it
-# adds is the share of each log that is localized — 94% of the scans instead
-# of 85% — because the backward pass localizes the start that the forward
-# pass spends searching. Two smoothed runs (Freiburg from scan 236, at both
-# seeds) call scans localized while more than 1 m off, against three forward
-# runs (the table's next-to-last column). Where one pass is still *searching*
+# succeeds in 197 of 200 runs, and smoothing adds little to that: it turns 3
+# failures into successes and 2 successes into failures (198 of 200). What it
+# adds is the share of each log that is localized — 95% of the scans instead
+# of 87% — because the backward pass localizes the start that the forward
+# pass spends searching. Two smoothed runs (one on ACES, one on Willow) call
+# scans localized while more than 1 m off, against three forward runs, all
+# on Willow (the table's next-to-last column). Where one pass is still *searching*
 # (the backward pass near the log's end, the forward pass near its start), its
 # estimate is never preferred to the other pass's: it is the best place of a
 # fresh cloud for the few scans it has seen, so it fits those scans by
@@ -1113,10 +1157,10 @@ print(section or "benchmarks/RESULTS.md has no bench_smooth section yet")
 # %% tags=["remove-cell"]
 if section:
     every = table_rows(section)["all"]
-    assert every[2].startswith("196/200") and every[3].startswith("196/200"), every
-    assert (every[4], every[5]) == ("4", "4"), every
-    assert every[6] == "85% / 94%" and every[8] == "3 / 2", every
-    assert table_rows(section)["freiburg-079"][8] == "0 / 2", table_rows(section)["freiburg-079"]
+    assert every[2].startswith("197/200") and every[3].startswith("198/200"), every
+    assert (every[4], every[5]) == ("3", "2"), every
+    assert every[6] == "87% / 95%" and every[8] == "3 / 2", every
+    assert [table_rows(section)[name][8] for name in ("aces", "willow")] == ["0 / 1", "3 / 1"], section
     seconds = [float(v) for v in every[9].split("/")]
     assert seconds[1] > 2 * seconds[0], every          # "more than twice the time of one pass"
 
