@@ -998,12 +998,13 @@ class ReversibleOdometry(OdometryMotion):
         return sample_odometry(poses, (p0, p1), self.alphas, rng, **options)
 
     def on_the_spot(self, trans: float, turn: float) -> float:
-        """The longest odometry step (metres) that counts as a turn on the spot when the heading turns by ``turn``.
+        """The translation noise (metres, a standard deviation) of a turn on the spot by ``turn`` with ``trans``.
 
-        It is the standard deviation of the translation noise that the model
-        gives a turn on the spot of ``turn`` radians with a translation of
-        ``trans`` (``sqrt(alpha3*trans**2 + alpha4*turn**2)`` with the default
-        noise): a translation that short is lost in that noise anyway, so its
+        A step whose translation ``trans`` is at most this counts as a turn on
+        the spot. The value is the standard deviation of the translation noise
+        that the model gives a turn on the spot of ``turn`` radians with a
+        translation of ``trans`` (``sqrt(alpha3*trans**2 + alpha4*turn**2)``
+        with the default noise): a translation that short is lost in that noise anyway, so its
         direction says nothing about how much the robot turned. Such a step
         moves the particles as measured, with the noise of a turn on the spot
         (``rot1 = 0``, ``rot2`` the whole turn). Decomposed as "turn towards
