@@ -1186,10 +1186,12 @@ class StateRules:
       likelihood field never checks whether a beam passed through a wall,
       and the ray cast does. Beams whose cast ray ends in an unknown cell
       are not judged; with fewer than ``min_beams`` judged the update has no
-      fit. No judged fit since the start or the last restart is no evidence:
-      it keeps a localized state (the last fits stand), it never makes one
-      (runs without a map or without range scans have no fit at all, and the
-      other conditions decide).
+      fit. No judged fit since the start, the last restart or the last time
+      the state turned lost is no evidence: it keeps a localized state (the
+      last fits stand), it never makes one (runs without a map or without
+      range scans have no fit at all, and the other conditions decide). The
+      fits of a place the filter has lost vouch for that place, not for the
+      one its cloud gathers on next.
 
     * the scan *pins* the pose: moved by ``probe_shift`` metres forwards,
       backwards, left or right, the estimate must fit the scan worse by at
@@ -1592,6 +1594,7 @@ def run_filter(
         raise ValueError(f"expand must be two numbers >= 0 (metres, radians); got {expand!r}")
     poor = lost_run = 0
     recent: list[float] = []
+    since_loss: list[float] | None = None   # the fits judged since the state last turned lost (None: not lost)
     fit_s = float("nan")
     t = int(n_steps)
     if t < 1:
@@ -1715,6 +1718,8 @@ def run_filter(
         gathered = cur == "searching" and e.best_weight >= rules.min_share and e.spread <= 4 * rules.max_spread
         if do_update and np.isfinite(fit[k]):
             recent = (recent + [float(fit[k])])[-int(rules.fit_window):]
+            if since_loss is not None:
+                since_loss = (since_loss + [float(fit[k])])[-int(rules.fit_window):]
             fit_s = float(np.mean(recent))
             wrong = fit_s < rules.restart_fit * fit_expected
             if agreed and wrong:
@@ -1785,10 +1790,12 @@ def run_filter(
             if cur == "localized":
                 cur = "lost"
         elif do_update:
+            # the fits that judge this place: since the loss, for a filter that lost the robot
+            fit_e = fit_s if since_loss is None else (float(np.mean(since_loss)) if since_loss else float("nan"))
             confident = ((not _is_scan(z) or n_valid[k] >= rules.min_beams) and e.best_weight >= rules.min_share
                          and e.spread <= rules.max_spread
                          and (e.cluster_std is None or e.cluster_std[2] <= rules.max_heading_std)
-                         and (fit_s >= rules.min_fit * fit_expected if np.isfinite(fit_s) else
+                         and (fit_e >= rules.min_fit * fit_expected if np.isfinite(fit_e) else
                               cur == "localized" or grid is None or not _is_scan(z)))
             if confident and rules.probe_shift > 0 and _is_scan(z) and n_valid[k] > 0:
                 confident = _pinned(sensor, pose, z, rules.probe_shift, rules.min_contrast, lo_r, hi_r)
@@ -1803,6 +1810,13 @@ def run_filter(
                 if cur == "localized" and bad >= rules.hold_lost:
                     cur = "lost"
         state[k] = cur
+        if prev == "localized" and cur == "lost":
+            # the fits made while localized vouch for that place, not for wherever the cloud goes now: being
+            # localized again takes fits judged since the loss (an update the map cannot judge gives none).
+            # The restart rules keep their window: this changes what the filter says, not what it does.
+            since_loss = []
+        elif cur == "localized" or trial is not None:
+            since_loss = None
         agreed_before = agreed_before and cur != "searching"
         if cur != prev:
             events.append((k, f"state {prev} -> {cur}"))

@@ -1057,6 +1057,45 @@ def test_a_fit_the_map_cannot_judge_never_makes_the_state_localized():
     assert list(seen.state) == ["localized"] * 6
 
 
+class _Flat:
+    """A sensor model that scores every pose alike: the state then follows the cloud's shape and the fit."""
+
+    sensor_offset, min_range, max_range, sigma_hit, z_hit = np.zeros(3), 0.0, 8.0, 0.2, 0.9
+
+    def log_likelihood(self, poses, ranges, angles):
+        return np.zeros(len(poses))
+
+
+def test_a_lost_filter_is_not_localized_again_on_the_fits_of_the_place_it_lost():
+    """Fits judged while localized vouch for that place only. The cloud scatters (lost), gathers again
+    where every beam ends in the map's unknown cells (no fit can be judged): it stays lost until a scan
+    the map can judge fits, though the fits before the loss were good."""
+    from localize.mcl import StateRules, run_filter
+
+    g = _office_with_unknown_east(6.5)
+    angles = np.array([0.0, 0.1, -0.1])
+    east = (np.full(3, 2.5), angles)                   # from (5, 5.5): every end point in unknown cells
+    west = (np.full(3, 2.5), angles + np.pi)           # towards mapped walls: the map can judge it
+    home = np.array([5.0, 5.5, 0.0])
+    tight = np.array([0.02, 0.02, 0.01])
+
+    def motion(p, u, rng):
+        if u == "scatter":                             # metres apart: no longer one place
+            return p + rng.normal(0.0, 1.0, p.shape) * np.array([2.0, 2.0, 1.0])
+        if u == "gather":                              # one tight cloud again
+            return home + rng.normal(0.0, 1.0, p.shape) * tight
+        return p
+
+    rng = np.random.default_rng(4)
+    rules = StateRules(hold=1, hold_lost=1, min_fit=0.0, restart_fit=0.0, probe_shift=0.0, min_beams=1)
+    plan = [(None, west), ("scatter", east), ("gather", east), (None, east), (None, east), (None, west)]
+    f = MCL(home + rng.normal(0.0, 1.0, (300, 3)) * tight, motion, _Flat(), rng=rng)
+    tr = run_filter(f, len(plan), lambda k: plan[k][0], lambda k: plan[k][1], grid=g, rules=rules)
+    assert np.isfinite(tr.fit[0]) and np.all(np.isnan(tr.fit[2:5])) and np.isfinite(tr.fit[5])
+    assert tr.spread[1] > 2 * rules.max_spread and np.all(tr.spread[2:] < 0.1)   # scattered, then one place
+    assert list(tr.state) == ["localized", "lost", "lost", "lost", "lost", "localized"]
+
+
 def test_run_filter_scores_every_beam_while_searching():
     """With a uniform cloud nothing has been agreed: skip_unknown_beams changes nothing at all."""
     from localize.mcl import run_filter

@@ -485,8 +485,10 @@ plt.show()
 #   beam passed *through* a wall, so a cloud can agree with itself on a wrong
 #   room; the ray cast does ask. A beam whose cast ray ends in one of the map's
 #   unknown cells cannot be judged; a filter none of whose scans the map could
-#   judge yet (since the start or a restart) has no evidence that they fit, and
-#   does not become localized on it;
+#   judge yet (since the start, a restart or the moment it got lost) has no
+#   evidence that they fit, and does not become localized on it. The fits made
+#   before the robot was lost vouch for the place it was lost at, not for the
+#   one the cloud gathers on next;
 # * **the scan pins the pose** — moved 1 m forwards, backwards, left or right,
 #   the estimate must fit the scan clearly worse (by 0.1 nat per beam). In a
 #   featureless corridor a cloud can shrink onto one stretch by resampling alone
@@ -664,12 +666,12 @@ def results_section(name):
     return (section[:section.find("\n## ", 3)] if "\n## " in section[3:] else section).strip()
 
 
-def table_rows(section, n_columns=10):
+def table_rows(section):
     """The data rows of the section's table, by their first cell (a list of the row's cells)."""
     rows = {}
     for line in section.splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if len(cells) == n_columns and cells[1].isdigit():
+        if line.startswith("|") and len(cells) > 2 and cells[1].isdigit():
             rows[cells[0]] = cells
     return rows
 
@@ -695,8 +697,10 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # correct, tight cloud that lost all of its weight, within one or two updates,
 # to a few particles 1–2 m away while the robot stood close to clutter; on
 # the four real logs it changes the success of one run (ACES 98% without
-# it). It costs a little confidence: 279 of the 300 runs end "localized" with
-# it, 281 without (the table's "ended localized" column). The runs that end
+# it). It costs no confidence: 277 of the 300 runs end "localized" with it
+# and without it (the table's "ended localized" column), and it halves the
+# runs that call a wrong place "localized" at some scan (3 with it, 6
+# without: the last column). The runs that end
 # "lost" end near the robot, in a stretch where the scans fit the map poorly
 # (the note under the table in `benchmarks/RESULTS.md`); they say so, they are
 # not wrong.
@@ -720,7 +724,11 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 #
 # What the table does show is honesty: no run ended "localized" while more
 # than 1 m off. A failed run ended either "lost" or "searching", and said so,
-# or localized again within 1 m of the robot after it had left it. The next
+# or localized again within 1 m of the robot after it had left it. The last
+# column is stricter: three Willow runs did call a wrong place "localized" for
+# a few scans early on, each time the mirror image of the right place in that
+# large, symmetric building (heading 180 degrees off), whose scans passed the
+# fit test too, before the state turned "lost" and the search went on. The next
 # cell checks these statements against the table, so that a re-run of the
 # benchmark cannot silently contradict them.
 
@@ -736,13 +744,18 @@ if section:
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
     assert all(r["success"] >= 0.95 for r in rows.values()), rows
     assert all(r["off"] == 0 for r in rows.values())
+    some_scan = {name: int(cells[10]) for name, cells in table_rows(section).items()}
+    assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 0, "csail": 0, "willow": 3}, some_scan
     scored = {name: cells[2].split()[0]
               for name, cells in table_rows(results_section("bench_global_short_beams_0")).items()}
     assert scored == {"intel": "60/60", "freiburg-079": "58/60", "aces": "59/60", "csail": "59/60",
                       "willow": "53/60"}, scored
     ended = [sum(int(cells[8]) for cells in table_rows(results_section(name)).values())
              for name in ("bench_global", "bench_global_short_beams_0")]
-    assert ended == [279, 281], ended
+    assert ended == [277, 277], ended
+    wrong_at_some_scan = [sum(int(cells[10]) for cells in table_rows(results_section(name)).values())
+                          for name in ("bench_global", "bench_global_short_beams_0")]
+    assert wrong_at_some_scan == [3, 6], wrong_at_some_scan
     without = {name: cells[2].split()[0] for name, cells in table_rows(results_section("bench_global_z_short_0")).items()}
     assert without == {"intel": "60/60", "freiburg-079": "58/60", "aces": "57/60", "csail": "59/60",
                        "willow": "46/60"}, without
@@ -779,7 +792,9 @@ print(held_out or "benchmarks/RESULTS.md has no bench_global_held_out section ye
 # unknown cells, which a likelihood field cannot rule out; the restart rules
 # above find the robot later. The note of that section in
 # `benchmarks/RESULTS.md` lists the failures. The honesty holds on this draw
-# as well: no run ended "localized" more than 1 m off.
+# as well: no run ended "localized" more than 1 m off, and four runs (two on
+# ACES, one each on Freiburg and Willow) called a look-alike "localized" for a
+# few scans before the state turned "lost".
 
 # %% tags=["remove-cell"]
 if held_out:
@@ -788,6 +803,8 @@ if held_out:
     assert all(int(r.split("/")[0]) >= 0.95 * int(r.split("/")[1]) for name, r in rates.items() if name != "willow"), rates
     assert rates["willow"] == "52/60", rates                                  # 87%
     assert all(int(cells[9]) == 0 for cells in table_rows(held_out).values())
+    some_scan = {name: int(cells[10]) for name, cells in table_rows(held_out).items()}
+    assert some_scan == {"intel": 0, "freiburg-079": 1, "aces": 2, "csail": 0, "willow": 1}, some_scan
 
 # %% [markdown]
 # On speed (`benchmarks/bench_cli.py`): a CMU-sized log — 700 scans of 180
