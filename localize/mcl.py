@@ -1594,7 +1594,7 @@ def run_filter(
         raise ValueError(f"expand must be two numbers >= 0 (metres, radians); got {expand!r}")
     poor = lost_run = 0
     recent: list[float] = []
-    since_loss: int | None = None   # how many of the fits in ``recent`` were judged since the state turned lost
+    since_loss: list[float] | None = None   # the fits judged since the state last turned lost (None: not lost)
     fit_s = float("nan")
     t = int(n_steps)
     if t < 1:
@@ -1719,7 +1719,7 @@ def run_filter(
         if do_update and np.isfinite(fit[k]):
             recent = (recent + [float(fit[k])])[-int(rules.fit_window):]
             if since_loss is not None:
-                since_loss += 1
+                since_loss = (since_loss + [float(fit[k])])[-int(rules.fit_window):]
             fit_s = float(np.mean(recent))
             wrong = fit_s < rules.restart_fit * fit_expected
             if agreed and wrong:
@@ -1791,8 +1791,7 @@ def run_filter(
                 cur = "lost"
         elif do_update:
             # the fits that judge this place: since the loss, for a filter that lost the robot
-            fit_e = fit_s if since_loss is None else (float(np.mean(recent[-since_loss:])) if since_loss else
-                                                      float("nan"))
+            fit_e = fit_s if since_loss is None else (float(np.mean(since_loss)) if since_loss else float("nan"))
             confident = ((not _is_scan(z) or n_valid[k] >= rules.min_beams) and e.best_weight >= rules.min_share
                          and e.spread <= rules.max_spread
                          and (e.cluster_std is None or e.cluster_std[2] <= rules.max_heading_std)
@@ -1815,7 +1814,7 @@ def run_filter(
             # the fits made while localized vouch for that place, not for wherever the cloud goes now: being
             # localized again takes fits judged since the loss (an update the map cannot judge gives none).
             # The restart rules keep their window: this changes what the filter says, not what it does.
-            since_loss = 0
+            since_loss = []
         elif cur == "localized" or trial is not None:
             since_loss = None
         agreed_before = agreed_before and cur != "searching"
