@@ -472,7 +472,8 @@ def localize_log(
     -------
     RunResult
     """
-    from .mcl import MCL, RobustOdometry, run_filter
+    from .mcl import MCL, RobustOdometry
+    from .runloop import run_filter
 
     check_rng(rng)
     if unknown_beams not in ("skip", "score"):

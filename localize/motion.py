@@ -1242,3 +1242,20 @@ def motion_model_velocity(pose: ArrayLike, u: ArrayLike, prev_pose: ArrayLike, d
         if jac > 0:
             total += p / max(jac, 1e-300)
     return total
+
+
+def odometry_pair(u: object) -> tuple[NDArray, NDArray] | None:
+    """``(prev, cur)`` if ``u`` is a pair of odometry poses, else None.
+
+    Examples
+    --------
+    >>> odometry_pair(([0, 0, 0], [1, 0, 0]))[1]
+    array([1., 0., 0.])
+    >>> odometry_pair(0.5) is None
+    True
+    """
+    if isinstance(u, tuple) and len(u) == 2:
+        a, b = np.asarray(u[0], dtype=float), np.asarray(u[1], dtype=float)
+        if a.shape == (3,) and b.shape == (3,):
+            return a, b
+    return None

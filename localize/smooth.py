@@ -71,6 +71,7 @@ Examples
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Callable
 
@@ -79,9 +80,10 @@ from numpy.typing import NDArray
 
 from ._checks import check_count, check_nonnegative, check_positive
 from .cli import DEFAULTS, RunResult, check_log_odometry, localize_log
+from .evidence import scan_fit
 from .geometry import angle_diff, compose, relative, wrap_angle
 from .grid import OccupancyGrid
-from .mcl import RunTrace, StateTrack, _intervals, _now, _scan_fit
+from .runloop import RunTrace, StateTrack, _intervals
 
 __all__ = ["PASSES", "Smoothed", "SmoothResult", "reverse_log", "reverse_trace", "combine", "scan_fit_function",
            "smoothed_trace", "smooth_log", "headline"]
@@ -162,7 +164,7 @@ def scan_fit_function(grid: OccupancyGrid, log, fit_distance: float, min_range: 
             r = ranges[k]
             ok = np.isfinite(r) & (r > lo) & (r < hi)
             if np.all(np.isfinite(pose)):
-                out[i] = _scan_fit(caster, pose, offset, r[ok], angles[ok], fit_d, min_beams)
+                out[i] = scan_fit(caster, pose, offset, r[ok], angles[ok], fit_d, min_beams)
         return out
 
     return fit
@@ -277,7 +279,7 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
     A pass of the doctests' toy filter (``toy_mcl``: particles on a line, a
     GPS that reads x = 5 m at every step):
 
-    >>> from localize.mcl import run_filter
+    >>> from localize.runloop import run_filter
     >>> f = run_filter(toy_mcl(), 10, lambda k: None, lambda k: (5.0,))
     >>> [str(v) for v in f.state[:2]]                # a pass needs a few scans to localize
     ['searching', 'searching']
@@ -606,7 +608,7 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
     back_kw = {**kwargs, "snapshot_every": 0}
     bw = localize_log(grid, reverse_log(log), rng=rng,
                       progress=None if progress is None else _Offset(progress, n), **back_kw)
-    t0 = _now()
+    t0 = time.perf_counter()
     if fit_distance is None:
         sigma = (kwargs.get("sensor_params") or {}).get("sigma_hit", 0.3)
         fit_distance = 2.0 * float(sigma)
@@ -618,7 +620,7 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
     tr = smoothed_trace(s)
     res = SmoothResult(times=fw.times, trace=tr, odometry_check=sign_check, smooth=s,
                        columns={"passes": s.passes, "source": s.source}, forward=fw, backward=bw,
-                       seconds_combine=_now() - t0)
+                       seconds_combine=time.perf_counter() - t0)
     return res
 
 

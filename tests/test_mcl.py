@@ -224,7 +224,8 @@ def test_occupied_penalty_is_a_finite_price_for_standing_in_an_obstacle():
 def test_run_filter_keeps_a_cloud_that_walks_into_an_obstacle_with_a_finite_penalty():
     """Not "off the map": an agreed cloud is neither re-drawn nor called lost for standing in a mapped obstacle
     (a door drawn shut); while the filter searches, a particle in an obstacle still has zero weight."""
-    from localize.mcl import OdometryMotion, run_filter
+    from localize.mcl import OdometryMotion
+    from localize.runloop import run_filter
 
     g = office()
     occ = g.occupied
@@ -547,7 +548,8 @@ def test_global_localization_in_the_office_succeeds_in_95_percent(office_grid, b
 
     Success: within 0.5 m and 0.2 rad of the truth over the last 5 of 20 steps.
     """
-    from localize.mcl import OdometryMotion, run_mcl
+    from localize.mcl import OdometryMotion
+    from localize.runloop import run_mcl
 
     ok = []
     for seed in range(20):
@@ -561,7 +563,8 @@ def test_global_localization_in_the_office_succeeds_in_95_percent(office_grid, b
 
 def test_tracking_error_stays_below_bound(office_grid, beam_model):
     """From a start guess 0.36 m / 8 degrees off, 500 particles track with RMSE < 0.15 m and max < 0.35 m."""
-    from localize.mcl import OdometryMotion, run_mcl
+    from localize.mcl import OdometryMotion
+    from localize.runloop import run_mcl
 
     for seed in (11, 12, 13):
         run = _run(office_grid, seed, 40)
@@ -578,7 +581,8 @@ def test_tracking_error_stays_below_bound(office_grid, beam_model):
 def test_kidnapped_robot_is_recovered_by_augmented_mcl(office_grid, field_model):
     """Kidnapped at step 15 of 50: augmented MCL (PR table 8.3) is back within 0.5 m in at least 4 of 5 runs,
     each time within 35 steps; plain MCL, with nothing to recover with, in at most 1."""
-    from localize.mcl import OdometryMotion, run_mcl
+    from localize.mcl import OdometryMotion
+    from localize.runloop import run_mcl
 
     def recovered(seed, **opts):
         run = _run(office_grid, seed, 50, kidnap_at=[15])
@@ -663,7 +667,7 @@ def _clusters_by_flood_fill(xy, size):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_cluster_labels_match_flood_fill(seed):
-    from localize.mcl import _cluster_labels
+    from localize.estimate import _cluster_labels
 
     rng = np.random.default_rng(seed)
     centres = rng.uniform(0, 10, size=(6, 2))
@@ -793,7 +797,8 @@ def test_unknown_cells_allowed_with_a_soft_penalty():
 
 
 def test_run_filter_rejects_an_impossible_odometry_step_and_reports_it():
-    from localize.mcl import OdometryMotion, run_filter
+    from localize.mcl import OdometryMotion
+    from localize.runloop import run_filter
 
     g = office()
     rng = np.random.default_rng(0)
@@ -808,7 +813,8 @@ def test_run_filter_rejects_an_impossible_odometry_step_and_reports_it():
 
 def test_run_filter_state_without_a_scan_fit():
     """A non-range sensor (no scan to fit): the state follows cluster share and spread alone."""
-    from localize.mcl import StateRules, run_filter
+    from localize.policies import StateRules
+    from localize.runloop import run_filter
 
     p, rng = _line(3000)
     f = MCL(p, shift, XYSensor(0.2), rng=rng)
@@ -871,8 +877,15 @@ class _RecordingField:
         return self.inner.log_likelihood(poses, ranges, angles)
 
 
+def _skip_beams(grid, f, offset, z, max_range, **kw):
+    """The beams the map cannot explain at the cloud's mean pose (what the beam-mask policy asks)."""
+    from localize.evidence import unexplained_beams
+    from localize.geometry import mean_pose
+
+    return unexplained_beams(grid, mean_pose(f.particles, f.weights), offset, z, max_range, **kw)
+
+
 def test_skip_unknown_beams_leaves_out_exactly_the_beams_that_end_in_unknown_cells():
-    from localize.mcl import _skip_beams
 
     g = _office_with_unknown_east(6.5)
     f = MCL.gaussian([5.0, 5.5, 0.0], (1e-6, 1e-6, 1e-6), 50, (0.0,) * 4, XYSensor(), rng=np.random.default_rng(0))
@@ -889,7 +902,7 @@ def test_skip_short_beams_leaves_out_the_beams_that_read_well_short_of_the_map()
     """From (5, 5.5) facing east in the office the map's walls are 5.8 m east, 4.8 m west, 0.9 m north: a
     reading 2.8 m short of the east wall is left out, one 0.1 m short (the pose's own error) is kept; when
     most of the scan reads short, nothing is left out."""
-    from localize.mcl import SHORT_BEAMS_MAX_SHARE, _skip_beams
+    from localize.evidence import SHORT_BEAMS_MAX_SHARE
     from localize.raycast import RayCaster
 
     g = office()
@@ -917,7 +930,7 @@ def test_the_probe_counts_the_beams_the_sensor_scored():
     it to 31 beams, and a scan whose beams were left out of the update (set to the maximum range), are
     judged as the beams that were scored -- dividing by every valid reading made the contrast 12x (or 2x)
     too small, so a pose the scan pins would never be called localized."""
-    from localize.mcl import _pinned
+    from localize.evidence import pinned as _pinned
     from localize.raycast import RayCaster
     from localize.sensors import LikelihoodField, select_beams
 
@@ -972,7 +985,8 @@ def test_run_filter_skip_short_beams_keeps_an_agreed_cloud_that_unmapped_clutter
     beams on it fit a few particles 2 m further on (where they would end on the mapped end wall) perfectly,
     and those take all the weight at once; left out as reading 2 m short of the map at the agreed place,
     the cloud stays with the robot."""
-    from localize.mcl import StateRules, run_filter
+    from localize.policies import StateRules
+    from localize.runloop import run_filter
     from localize.raycast import RayCaster
     from localize.sensors import LikelihoodField
 
@@ -1005,7 +1019,8 @@ def test_run_filter_skip_short_beams_keeps_an_agreed_cloud_that_unmapped_clutter
 
 
 def test_run_filter_skips_unknown_beams_only_once_the_cloud_agrees():
-    from localize.mcl import StateRules, run_filter
+    from localize.policies import StateRules
+    from localize.runloop import run_filter
 
     g = _office_with_unknown_east(6.5)
     angles = np.array([0.0, 0.1, -0.1])
@@ -1036,7 +1051,8 @@ def test_a_fit_the_map_cannot_judge_never_makes_the_state_localized():
     """A tight cloud whose every beam ends in the map's unknown cells has no evidence that the scans fit:
     it stays searching however long it agrees with itself; once a judged scan has made it localized, the
     unjudged ones that follow do not take that away."""
-    from localize.mcl import StateRules, run_filter
+    from localize.policies import StateRules
+    from localize.runloop import run_filter
 
     g = _office_with_unknown_east(6.5)
     angles = np.array([0.0, 0.1, -0.1])
@@ -1070,7 +1086,8 @@ def test_a_lost_filter_is_not_localized_again_on_the_fits_of_the_place_it_lost()
     """Fits judged while localized vouch for that place only. The cloud scatters (lost), gathers again
     where every beam ends in the map's unknown cells (no fit can be judged): it stays lost until a scan
     the map can judge fits, though the fits before the loss were good."""
-    from localize.mcl import StateRules, run_filter
+    from localize.policies import StateRules
+    from localize.runloop import run_filter
 
     g = _office_with_unknown_east(6.5)
     angles = np.array([0.0, 0.1, -0.1])
@@ -1098,7 +1115,7 @@ def test_a_lost_filter_is_not_localized_again_on_the_fits_of_the_place_it_lost()
 
 def test_run_filter_scores_every_beam_while_searching():
     """With a uniform cloud nothing has been agreed: skip_unknown_beams changes nothing at all."""
-    from localize.mcl import run_filter
+    from localize.runloop import run_filter
 
     g = _office_with_unknown_east(6.5)
     angles = np.linspace(-np.pi / 2, np.pi / 2, 9)
@@ -1138,7 +1155,7 @@ _HERE, _THERE = np.array([3.0, 3.0, 0.0]), np.array([15.0, 8.0, 0.0])   # free p
 
 def _restart_run(start, prefers, clutter, sampler=None, n_steps=45):
     """A stationary robot at _HERE: ``clutter`` scans that fit nowhere (every beam 0.3 m), then true scans."""
-    from localize.mcl import run_filter
+    from localize.runloop import run_filter
     from localize.raycast import RayCaster
 
     g = office()
@@ -1182,14 +1199,16 @@ def test_a_restart_replaces_a_wrong_place_that_loses_both_likelihood_and_fit():
 
 def test_a_probation_survives_a_cloud_with_no_weight_left():
     """A group whose every particle got zero likelihood is dropped, not turned into NaN weights."""
-    from localize.mcl import _probation
+    from localize.policies import Context, Probation, StateRules
 
     f = MCL.gaussian([3.0, 3.0, 0.0], np.eye(3) * 1e-4, 10, (0.0,) * 4, XYSensor(), rng=np.random.default_rng(0))
     f.particles = np.vstack([f.particles, f.particles + [1.0, 0.0, 0.0]])
     f.log_weights = np.concatenate([np.full(10, -np.inf), np.full(10, -np.log(10))])
-    events = []
-    trial = {"n_old": 10, "updates": 1, "fits": [[0.9], [0.1]], "poses": (_HERE, _HERE), "shown": 0}
-    assert _probation(f, trial, events, 7, 0.0) is None
+    trial = Probation(10, _HERE, 0.0, 5)
+    trial.updates, trial.fits = 1, [[0.9], [0.1]]
+    ctx = Context(StateRules())
+    assert trial.resample(f, 7, 0.0, ctx) is False                 # decided
+    events = ctx.events
     assert f.n == 10 and np.all(np.isfinite(f.log_weights)) and np.allclose(f.particles[:, 0], 4.0, atol=0.1)
     assert "particles drawn over the map won" in events[0][1]
 
@@ -1198,7 +1217,12 @@ def test_a_probation_favours_a_new_place_only_on_enough_evidence():
     """One or two scans are no evidence: early in a probation a fresh cloud that outweighs and outfits the old
     place is not yet shown (the estimate would jump to a random pile of the new particles and back); nor is
     one whose fit, though better than the old place's, is too poor to be the robot's place either."""
-    from localize.mcl import PROBATION, _trial_favours
+    from localize.policies import PROBATION, Probation
+
+    def _trial_favours(trial, shares):
+        p = Probation(1, _HERE, trial["min_fit"], 5)
+        p.fits = trial["fits"]
+        return p.favours(shares)
 
     shares = np.log([0.1, 0.9])                     # the fresh cloud holds most of the weight ...
     for n in range(1, PROBATION[0] + 2):
@@ -1228,7 +1252,8 @@ class _Fades(_Prefers):
 def test_a_filter_lost_for_restart_after_updates_searches_the_map_again():
     """Lost without agreeing on a wrong place (the cloud spread out, the robot carried away): after restart_after
     more updates whose scans do not fit the best place, global localization starts again on probation."""
-    from localize.mcl import StateRules, run_filter
+    from localize.policies import StateRules
+    from localize.runloop import run_filter
     from localize.raycast import RayCaster
 
     g = office()

@@ -50,7 +50,8 @@ from IPython.display import HTML
 
 import localize
 from localize import maps, metrics
-from localize.mcl import MCL, OdometryMotion, estimate_pose, run_mcl
+from localize.mcl import MCL, OdometryMotion, estimate_pose
+from localize.runloop import run_mcl
 from localize.metrics import heading_error, position_error
 from localize.plot import animation_html, draw_map, draw_robot, draw_scan
 from localize.plot.mcl import animate_snapshots, draw_belief, plot_errors, snapshot_strip
@@ -96,6 +97,69 @@ print("localize", localize.__version__)
 # | sensor model | `BeamModel(..., method="compact")` | `LikelihoodField`, `LandmarkModel`, anything with `log_likelihood` |
 # | resampler | `"systematic"` | `"stratified"`, `"residual"`, `"multinomial"`, any `f(weights, rng)` |
 # | policy | resample when `N_eff < 0.5 M` | `resample_threshold=1.0` resamples every step |
+
+# %% [markdown]
+# ## The loop that runs
+#
+# The filter's methods are the lines of the table: `predict` samples the motion
+# model for every particle, `update` adds the log-likelihood of the scan to
+# every log-weight, `estimate` summarises the cloud and `resample` draws the new
+# set. The loop that runs a filter over a whole log — in this chapter, in the
+# command line of chapter 9 and in the benchmarks — is `localize.runloop.run`.
+# Here it is, printed from the package itself (without its docstring), so that
+# what you read is what runs:
+
+# %%
+import inspect
+
+from localize import runloop
+
+source = inspect.getsource(runloop.run)
+signature, _, rest = source.partition('"""')
+print(signature.rstrip() + "\n    ..." + rest.partition('"""')[2])
+
+# %% [markdown]
+# Read it beside the table:
+#
+# * `mcl.predict(u)` is line 4, "sample `x[m] ~ p(x' | u, x[m])`", for all
+#   particles at once. At step 0 there is no motion yet: the first scan is used
+#   alone.
+# * `mcl.update(*z)` is line 5, the weight `p(z | x[m], map)`, added in log space.
+# * `p.estimate(step, mcl)` summarises the weighted cloud *before* resampling,
+#   which would only add noise to the answer (the next section shows how a cloud
+#   becomes one pose).
+# * `mcl.needs_resampling()` and `mcl.resample(...)` are lines 8–11: draw a new
+#   set with probability proportional to the weights, here only when the
+#   effective sample size has fallen (PR section 4.2.4).
+#
+# Everything written `p.something` is a **policy**: a rule beyond the textbook
+# that a real robot needs, each a small object of `localize.policies` with its
+# own tests. `p.admit` refuses an odometry record that no robot can have made;
+# `p.measurement` skips the scan of a robot that has not moved and leaves out
+# beams the map cannot explain; `p.assess` asks the map whether the scan fits
+# the estimate; `p.intervene` starts global localization again when the cloud
+# is confidently wrong; `p.conclude` says whether the filter is *searching*,
+# *localized* or *lost*. Chapter 8 meets the recovery policies and the state,
+# chapter 9 those a real log needs. With no policies (`Policies()`, the default)
+# every `p.` call does nothing, and `run` is exactly a loop of `MCL.step`, the
+# four steps in one method. The cell below checks that on this chapter's
+# simulated office run (set up in the next section), bit for bit:
+
+# %%
+def bare_loop_matches_step(n_steps=8, n_particles=2000):
+    grid_ = maps.office()
+    angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)
+    sim_run = range_run(grid_, np.random.default_rng(7), n_steps=n_steps, angles=angles, max_range=8.0)
+    sensor = LikelihoodField(grid_, 8.0, sigma_hit=0.2, temper=0.3)
+    a, b = (MCL.uniform(grid_, n_particles, OdometryMotion(sim_run.alphas, min_std=0.01), sensor,
+                        rng=np.random.default_rng(3)) for _ in range(2))
+    for k in range(n_steps):                                   # the four steps, one method call each
+        a.step(sim_run.control(k) if k > 0 else None, sim_run.ranges[k], angles)
+    runloop.run(b, n_steps, sim_run.control, lambda k: (sim_run.ranges[k], angles))   # the loop, no policy
+    return np.array_equal(a.particles, b.particles) and np.array_equal(a.log_weights, b.log_weights)
+
+
+print("run() with no policy gives the same particles and weights as a loop of MCL.step:", bare_loop_matches_step())
 
 # %% [markdown]
 # ## The world and the robot
@@ -175,10 +239,12 @@ plt.show()
 # %% [markdown]
 # ## Global localization
 #
-# `run_mcl` feeds the run to the filter step by step — the first scan alone,
-# then `f.step(u_k, z_k, angles)` — and records the estimate, the effective
-# sample size and whether it resampled. We also keep snapshots of the weighted
-# particle set for the figures.
+# `run_mcl` feeds the run to the filter through the loop above — the first scan
+# alone, then the motion and the scan of each step — with one policy watching:
+# the state (*searching*, *localized* or *lost*, chapter 8). An observer of the
+# loop, `runloop.Recorder`, writes down the estimate, the effective sample size
+# and whether the filter resampled at each step, and keeps snapshots of the
+# weighted particle set for the figures.
 
 # %%
 SNAPS = [0, 1, 2, 3, 5, 8, 12, 29]

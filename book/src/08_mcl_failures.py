@@ -38,7 +38,8 @@ import numpy as np
 import localize
 from localize import maps, metrics
 from localize.kld import KLDSampling, kld_bound
-from localize.mcl import MCL, Augmented, OdometryMotion, estimate_pose, run_mcl
+from localize.mcl import MCL, Augmented, OdometryMotion, estimate_pose
+from localize.runloop import run_mcl
 from localize.metrics import heading_error, position_error
 from localize.plot import draw_map
 from localize.plot.mcl import draw_belief, plot_errors, plot_particle_count, snapshot_strip
@@ -441,6 +442,64 @@ plt.show()
 # whole run costs about an eighth of the fixed-size filter's work, with the
 # same accuracy.
 #
+# ## Recovery as policies of the run loop
+#
+# Injection, augmented MCL and KLD-sampling live inside the filter's own
+# resampling step. A filter that runs unattended on a robot needs a few more
+# decisions that are not one resampling's business, and the run loop of
+# chapter 7 (`localize.runloop.run`) takes each of them from a **policy**, a
+# small object of `localize.policies` with a test of its own:
+#
+# | policy | asks, at each step | does | where in the loop |
+# |---|---|---|---|
+# | `ThresholdState` | is the cloud agreed on one place, and does the scan fit the map there? | says *searching*, *localized* or *lost* | `p.conclude` |
+# | `Redraw` | did every particle get zero likelihood, or leave the map? is the filter lost? | re-draws every particle; while lost, injects a share at each resampling | `p.intervene`, `p.injection` |
+# | `Restart` + `Probation` | has an agreed cloud's scan not fitted the map for many updates? | adds a fresh uniform cloud beside the old one; the scans pick the winner | `p.intervene` |
+# | `Expansion` | does the scan not fit the agreed place? | spreads the cloud a little wider (Ueda et al. 2004) | `p.assess` |
+#
+# `localize.runloop.run_filter` assembles them from plain arguments. The same
+# kidnapping as above, with plain MCL (no injection at all) but the filter
+# allowed to restart after three updates whose scans do not fit its place and
+# to inject 20 % while lost:
+
+# %%
+from localize.runloop import run_filter  # noqa: E402
+
+
+def kidnap_with_policies(seed=0, n_steps=50, n=5000):
+    r = range_run(office, np.random.default_rng(seed), n_steps=n_steps, angles=ANGLES, max_range=MAX_RANGE,
+                  kidnap_at=[KIDNAP])
+    fk = MCL.gaussian(r.poses[0], (0.2, 0.2, 0.1), n, OdometryMotion(r.alphas, min_std=0.01), lf,
+                      rng=np.random.default_rng(100 + seed), grid=office)
+    tr = run_filter(fk, n_steps, r.control, lambda k: (r.ranges[k], ANGLES), restart_after=3,
+                    recovery_injection=0.2)
+    return r, tr
+
+
+run_p, tr_p = kidnap_with_policies()
+e_p = position_error(tr_p.poses, run_p.poses)
+for k, text in tr_p.events:
+    print(f"step {k:2d}: {text[:100]}")
+wrong = np.flatnonzero((tr_p.state == "localized") & (e_p > 1.0))
+print("steps called localized while more than 1 m off:", f"{wrong.min()}-{wrong.max()}" if wrong.size else "none")
+print(f"last 5 steps: {', '.join(tr_p.state[-5:])}; error at most {e_p[-5:].max():.1f} m")
+assert "lost" in tr_p.state[KIDNAP:KIDNAP + 10]                   # the filter says it lost the robot ...
+assert np.all(tr_p.state[-5:] == "localized") and e_p[-5:].max() < 0.5   # ... and ends found, and says so
+assert wrong.size >= 1 and e_p[wrong].max() > 5.0                  # the text below: fooled for a few steps
+
+# %% [markdown]
+# The filter says when it has lost the robot, searches, and ends found, and says
+# so — without ground truth. But look at the middle: for a few steps the state
+# says *localized* while the estimate is ten metres off. The fresh cloud had
+# gathered in a room that fits the scans about as well as the right one, and
+# every threshold of `StateRules` (share of the weight, spread, fit to the map)
+# was met there. A state built from thresholds is only as good as the places
+# the thresholds were chosen on; telling a right answer from a look-alike is
+# the open problem of "am I localized?", and the reason the state deserves a
+# probability rather than a verdict. Chapter 9 adds the policies a real log
+# needs (odometry records that are wrong, a robot that stands still, beams that
+# hit what the map does not show).
+#
 # ## Summary
 #
 # * **Deprivation**: a filter cannot weigh hypotheses it does not hold. More
@@ -453,6 +512,8 @@ plt.show()
 #   one and solves the kidnapped robot problem.
 # * **KLD-sampling** spends particles where the belief is uncertain and saves
 #   them when it is not.
+# * The run loop takes the decisions beyond one resampling from **policies**:
+#   the state, re-drawing and injecting while lost, restarting on probation.
 #
 # ## Exercises
 #

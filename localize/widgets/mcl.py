@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 
 from ..maps import office
-from ..mcl import MCL, OdometryMotion, run_mcl
+from ..mcl import MCL, OdometryMotion
 from ..metrics import heading_error, position_error
 from ..plot import draw_map, draw_robot
 from ..plot.mcl import draw_particles
+from ..runloop import run_mcl
 from . import quiet_outside_ipython, with_hint
 
 __all__ = ["simulate", "mcl_run_figure", "mcl_widget_figure", "mcl_player", "DEMOS", "DEMO_VARIANTS"]

@@ -46,7 +46,8 @@ def kidnap_trial(alpha_slow: float = 0.1, alpha_fast: float = 0.5, temperature: 
     >>> len(trace), int(trace.n_injected[:3].sum()) >= 0
     (36, True)
     """
-    from ..mcl import MCL, Augmented, OdometryMotion, run_mcl
+    from ..mcl import MCL, Augmented, OdometryMotion
+    from ..runloop import run_mcl
     from ..sim import range_run
 
     if int(n_particles) < 50:
