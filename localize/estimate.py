@@ -52,6 +52,10 @@ class Estimate:
     cluster_std : ndarray (3,)
         Spread of the best cluster alone (like ``std``); :attr:`spread` is its
         position part. With one cluster it equals ``std``.
+    cluster_cov : ndarray (3, 3)
+        Weighted covariance of the best cluster alone (like ``cov``): the
+        pose covariance a navigation stack wants (ROS AMCL publishes one with
+        every pose). With one cluster it equals ``cov``.
 
     Examples
     --------
@@ -68,6 +72,7 @@ class Estimate:
     n_clusters: int
     n_eff: float
     cluster_std: NDArray[np.float64] | None = None
+    cluster_cov: NDArray[np.float64] | None = None
 
     @property
     def spread(self) -> float:
@@ -166,18 +171,18 @@ def _estimate(p: NDArray, w: NDArray, cluster_size: float, min_share: float, mas
 
     labels, n_lab = _cluster_labels(p[:, :2], w, cluster_size, mass)
     if n_lab == 0:
-        return Estimate(mean.copy(), mean, std, cov, 1.0, 1, n_eff, std)
+        return Estimate(mean.copy(), mean, std, cov, 1.0, 1, n_eff, std, cov)
     inside = labels >= 0
     share = np.bincount(labels[inside], weights=w[inside], minlength=n_lab)
     if n_lab == 1 and share[0] >= mass * (1.0 - 1e-9):
         # one cluster that holds the weight the histogram was asked to cover: the belief is unimodal
-        return Estimate(mean.copy(), mean, std, cov, 1.0, 1, n_eff, std)
+        return Estimate(mean.copy(), mean, std, cov, 1.0, 1, n_eff, std, cov)
     best = int(np.argmax(share))
     sel = labels == best
     wb = w[sel] / share[best]
-    pose, _, cstd = _weighted_stats(p[sel], wb)
+    pose, ccov, cstd = _weighted_stats(p[sel], wb)
     n_clusters = int(np.count_nonzero(share >= max(min_share, 1e-12)))
-    return Estimate(pose, mean, std, cov, float(share[best]), max(n_clusters, 1), n_eff, cstd)
+    return Estimate(pose, mean, std, cov, float(share[best]), max(n_clusters, 1), n_eff, cstd, ccov)
 
 
 def _cluster_labels(xy: NDArray, w: NDArray, size: float, mass: float) -> tuple[NDArray[np.int64], int]:

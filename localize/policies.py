@@ -570,7 +570,7 @@ class Probation:
         g = self.shown = self.favours(shares)
         eg = ests[g]
         return Estimate(eg.pose, e.mean, e.std, e.cov, float(np.exp(shares[g]) * eg.best_weight), e.n_clusters,
-                        e.n_eff, eg.cluster_std)
+                        e.n_eff, eg.cluster_std, eg.cluster_cov)
 
     def resample(self, mcl: Any, k: int, injection: float, ctx: Context) -> bool:
         """One step of the probation's resampling; True while the trial goes on, False once decided."""

@@ -117,6 +117,9 @@ class RunTrace(StateTrack):
         Wall time of the filtering loop.
     snapshots : dict[int, tuple[ndarray, ndarray]]
         ``step -> (particles, weights)`` after the update of that step.
+    cov : ndarray (T, 3, 3), optional
+        Weighted covariance of the best cluster behind each estimate
+        (:attr:`localize.estimate.Estimate.cluster_cov`).
     """
 
     means: NDArray[np.float64]
@@ -135,6 +138,7 @@ class RunTrace(StateTrack):
     beam_evaluations: int
     seconds: float
     snapshots: dict = field(default_factory=dict)
+    cov: NDArray[np.float64] | None = None
 
 
     def state_summary(self) -> dict:
@@ -369,7 +373,7 @@ class Recorder:
         e, st = step.estimate, mcl.status
         self.rows.append((step.pose, e.mean, e.std, e.spread, e.best_weight, step.n_eff, step.n_particles,
                           st.n_injected, st.p_inject, step.updated, st.resampled, step.degenerate, step.n_valid,
-                          step.fit, step.on_map, step.state))
+                          step.fit, step.on_map, step.state, e.cov if e.cluster_cov is None else e.cluster_cov))
         if step.updated:
             self.evaluations += step.n_particles * (int(np.size(step.z[1])) if is_scan(step.z) else 1)
         if step.k in self.keep:
@@ -392,7 +396,8 @@ class Recorder:
                         p_inject=arr[8].astype(float), updated=arr[9].astype(bool), resampled=arr[10].astype(bool),
                         degenerate=arr[11].astype(bool), n_valid=arr[12].astype(np.int64), fit=arr[13].astype(float),
                         on_map=arr[14].astype(float), state=np.array(cols[15], dtype="<U9"), events=events,
-                        beam_evaluations=int(self.evaluations), seconds=float(seconds), snapshots=self.snapshots)
+                        beam_evaluations=int(self.evaluations), seconds=float(seconds), snapshots=self.snapshots,
+                        cov=np.array(cols[16], dtype=float).reshape(-1, 3, 3))
 
 
 def _check_driver_arguments(recovery_injection: float, skip_short_beams: float,

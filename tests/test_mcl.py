@@ -986,8 +986,8 @@ def test_run_filter_skip_short_beams_keeps_an_agreed_cloud_that_unmapped_clutter
     and those take all the weight at once; left out as reading 2 m short of the map at the agreed place,
     the cloud stays with the robot."""
     from localize.policies import StateRules
-    from localize.runloop import run_filter
     from localize.raycast import RayCaster
+    from localize.runloop import run_filter
     from localize.sensors import LikelihoodField
 
     g = _corridor()
@@ -1155,8 +1155,8 @@ _HERE, _THERE = np.array([3.0, 3.0, 0.0]), np.array([15.0, 8.0, 0.0])   # free p
 
 def _restart_run(start, prefers, clutter, sampler=None, n_steps=45):
     """A stationary robot at _HERE: ``clutter`` scans that fit nowhere (every beam 0.3 m), then true scans."""
-    from localize.runloop import run_filter
     from localize.raycast import RayCaster
+    from localize.runloop import run_filter
 
     g = office()
     angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)
@@ -1253,8 +1253,8 @@ def test_a_filter_lost_for_restart_after_updates_searches_the_map_again():
     """Lost without agreeing on a wrong place (the cloud spread out, the robot carried away): after restart_after
     more updates whose scans do not fit the best place, global localization starts again on probation."""
     from localize.policies import StateRules
-    from localize.runloop import run_filter
     from localize.raycast import RayCaster
+    from localize.runloop import run_filter
 
     g = office()
     angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)

@@ -24,7 +24,6 @@ from localize.policies import (
     ThresholdState,
 )
 from localize.raycast import RayCaster
-from localize.sensors import LikelihoodField
 
 ANGLES = np.linspace(-np.pi / 2, np.pi / 2, 19)
 POSE = np.array([3.0, 3.0, 0.5])

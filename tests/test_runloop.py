@@ -5,9 +5,9 @@ import inspect
 import numpy as np
 import pytest
 
+from localize.kld import KLDSampling
 from localize.maps import office
 from localize.mcl import MCL, Augmented
-from localize.kld import KLDSampling
 from localize.policies import StateRules
 from localize.raycast import RayCaster
 from localize.runloop import Policies, Recorder, default_policies, run, run_filter
@@ -135,3 +135,16 @@ def test_policies_with_nothing_set_are_the_plain_filter():
     p = Policies()
     assert (p.odometry, p.gate, p.beams, p.evidence, p.restart, p.redraw, p.state) == (None,) * 7
     assert p.update_options() == {} and p.events == []
+
+
+def test_the_trace_holds_a_symmetric_positive_semidefinite_covariance_per_step():
+    g, truth, scans = _drive(8)
+    tr = run_filter(_filter(g, 2), 8, lambda k: (truth[k - 1], truth[k]), lambda k: (scans[k], ANGLES),
+                    snapshot_steps=[7])
+    assert tr.cov.shape == (8, 3, 3)
+    assert np.allclose(tr.cov, np.transpose(tr.cov, (0, 2, 1)))
+    assert np.all(np.linalg.eigvalsh(tr.cov).min(axis=1) >= -1e-12)
+    parts, w = tr.snapshots[7]
+    from localize.estimate import estimate_pose
+
+    np.testing.assert_allclose(tr.cov[7], estimate_pose(parts, w).cluster_cov, rtol=1e-9, atol=1e-12)

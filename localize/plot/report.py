@@ -1,0 +1,133 @@
+"""The report picture of a run: where the filter put the robot, how sure it was, and how it did.
+
+:func:`report_figure` draws two panels from a :class:`localize.runloop.RunTrace`:
+
+* the map with the estimated trajectory coloured by the state (*searching*,
+  *localized*, *lost*), the reference trajectory when one is known, the final
+  particle cloud (when the trace holds a snapshot of the last step), start and
+  end marked, and a legend;
+* the error against the reference over the scans (when one is given), or the
+  spread of the best cluster, on a log axis, with the state shaded behind it.
+
+``localize run`` writes it as ``report.png`` with every run.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+from numpy.typing import ArrayLike
+
+from ..grid import OccupancyGrid
+from . import draw_map
+
+__all__ = ["report_figure", "STATE_COLORS"]
+
+#: Colour of each state in the report (trajectory points and the shading of the time panel).
+STATE_COLORS = {"searching": "tab:orange", "localized": "tab:green", "lost": "tab:red"}
+
+
+def _state_runs(state: np.ndarray) -> list[tuple[int, int, str]]:
+    """``[(first, last, state), ...]``: the stretches of equal state."""
+    out = []
+    start = 0
+    for k in range(1, len(state) + 1):
+        if k == len(state) or state[k] != state[start]:
+            out.append((start, k - 1, str(state[start])))
+            start = k
+    return out
+
+
+def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None = None, *,
+                  times: ArrayLike | None = None, title: str | None = None, max_particles: int = 3000) -> Figure:
+    """The report picture of a run (see the module's docstring); returns the Figure.
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+        The map the run used.
+    trace : localize.runloop.RunTrace
+        The run; ``trace.snapshots[len(trace) - 1]``, if present, is drawn as
+        the final particle cloud.
+    reference : array_like (T, 3), optional
+        Reference poses per scan (ground truth or a SLAM estimate); NaN rows
+        are allowed (no reference at that scan).
+    times : array_like (T,), optional
+        Time of each scan (s) for the second panel's axis (default: the scan index).
+    title : str, optional
+        Title above both panels.
+    max_particles : int
+        At most this many particles of the final cloud are drawn.
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> from localize.mcl import MCL
+    >>> from localize.runloop import run_filter
+    >>> from localize.sensors import LikelihoodField
+    >>> g = office()
+    >>> lf = LikelihoodField(g, 8.0, sigma_hit=0.2, temper=0.2)
+    >>> rng = np.random.default_rng(1)
+    >>> angles = np.linspace(-np.pi / 2, np.pi / 2, 37)
+    >>> truth = np.array([[3.0, 3.0, 1.0]])
+    >>> f = MCL.uniform(g, 3000, (0.0,) * 4, lf, rng=rng)
+    >>> tr = run_filter(f, 8, lambda k: None, lambda k: (lf.sample(truth, angles, rng)[0], angles), snapshot_steps=[7])
+    >>> fig = report_figure(g, tr, np.repeat(truth, 8, axis=0))
+    >>> labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    >>> labels[:3], labels[-2:]
+    (['final particles (3,000)', 'reference', 'estimate: searching'], ['start', 'end'])
+    >>> plt.close(fig)
+    """
+    poses = np.asarray(trace.poses, dtype=float)
+    state = np.asarray(trace.state)
+    t = np.arange(len(poses), dtype=float) if times is None else np.asarray(times, dtype=float)
+    ref = None if reference is None else np.asarray(reference, dtype=float)
+    if ref is not None and ref.shape != poses.shape:
+        raise ValueError(f"reference must hold one pose per scan, shape {poses.shape}; got {ref.shape}")
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1.35, 1.0]})
+    draw_map(grid, ax=ax)
+    last = len(poses) - 1
+    if last in getattr(trace, "snapshots", {}):
+        parts, w = trace.snapshots[last]
+        sub = slice(None) if len(parts) <= max_particles else np.linspace(0, len(parts) - 1, max_particles).astype(int)
+        ax.scatter(parts[sub, 0], parts[sub, 1], s=2, color="tab:purple", alpha=0.35, linewidths=0,
+                   label=f"final particles ({len(parts):,})", zorder=2)
+    if ref is not None:
+        ax.plot(ref[:, 0], ref[:, 1], color="k", lw=1.0, alpha=0.6, label="reference", zorder=3)
+    ax.plot(poses[:, 0], poses[:, 1], color="0.4", lw=0.6, alpha=0.7, zorder=3)
+    for name, color in STATE_COLORS.items():
+        sel = state == name
+        if sel.any():
+            ax.scatter(poses[sel, 0], poses[sel, 1], s=9, color=color, label=f"estimate: {name}", zorder=4)
+    ax.plot(*poses[0, :2], marker="o", ms=9, mfc="none", mec="k", mew=1.5, ls="none", label="start", zorder=5)
+    ax.plot(*poses[-1, :2], marker="s", ms=9, mfc="none", mec="k", mew=1.5, ls="none", label="end", zorder=5)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    ax.set_title("trajectory over the map, coloured by state")
+
+    if ref is not None:
+        err = np.hypot(*(poses[:, :2] - ref[:, :2]).T)
+        ax2.plot(t, err, color="k", lw=1.2, label="position error (m)")
+        ax2.set_ylabel("error against the reference (m)")
+    else:
+        ax2.plot(t, np.asarray(trace.spread, dtype=float), color="k", lw=1.2, label="spread of the best cluster (m)")
+        ax2.set_ylabel("spread of the best cluster (m)")
+    ax2.set_yscale("log")
+    for a, b, name in _state_runs(state):
+        lo = t[a] - (0.5 if times is None else 0.0)
+        hi = t[b] + (0.5 if times is None else 0.0)
+        ax2.axvspan(lo, hi, color=STATE_COLORS.get(name, "0.8"), alpha=0.15, lw=0)
+    handles = ax2.get_legend_handles_labels()[0] + [Patch(color=c, alpha=0.3, label=n) for n, c in STATE_COLORS.items()]
+    ax2.legend(handles=handles, loc="upper right", fontsize=8)
+    ax2.set_xlabel("time (s)" if times is not None else "scan")
+    ax2.grid(True, alpha=0.3, which="both")
+    ax2.set_title("error" if ref is not None else "spread", loc="left")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig
