@@ -46,7 +46,8 @@ from ._checks import (
     check_probability,
 )
 
-__all__ = ["RunSettings", "DEFAULTS", "LEGACY_NAMES", "describe", "add_arguments", "from_namespace", "given_options",
+__all__ = ["RunSettings", "DEFAULTS", "LEGACY_NAMES", "describe", "add_arguments", "from_namespace", "parse_options",
+           "given_options",
            "with_amcl", "setting_names"]
 
 
@@ -489,6 +490,18 @@ def from_namespace(args: argparse.Namespace, **changes: Any) -> RunSettings:
     """
     values = {n: getattr(args, n) for n in setting_names(cli_only=True) if hasattr(args, n)}
     return RunSettings(**{**values, **changes})
+
+
+def parse_options(argv: list[str] | tuple[str, ...] = ()) -> RunSettings:
+    """The :class:`RunSettings` that ``localize run``'s filter options ``argv`` stand for (the benchmarks' way to
+    run exactly what the command line runs).
+
+    >>> parse_options(["--kld", "0", "--short-beams", "0.5"]).skip_short_beams
+    0.5
+    """
+    ap = argparse.ArgumentParser(prog="localize run", add_help=False)
+    add_arguments(ap)
+    return from_namespace(ap.parse_args(list(argv)))
 
 
 def given_options(option_dests: Mapping[str, str], argv: list[str] | tuple[str, ...]) -> set[str]:
