@@ -63,7 +63,7 @@ from tqdm import tqdm
 
 from . import __version__
 from . import settings as _settings
-from ._checks import check_count
+from ._checks import check_count, check_positive
 from ._output import RunOutput
 from ._resources import check_memory
 from .grid import OccupancyGrid
@@ -322,10 +322,10 @@ def _save_animation(anim, path: Path, writer, dpi: int) -> None:
 
 
 # ============================================================================ argument parsing
-_positive_int = _settings._argparse_type(check_count, "positive_int")
-_seed = _settings._argparse_type(_settings._count0, "seed")
-_particles = _settings._argparse_type(_settings._particles, "particles")
-_positive_float = _settings._argparse_type(_settings._metres, "positive_float")
+_positive_int = _settings.argparse_type(check_count, "positive_int")
+_seed = _settings.argparse_type(lambda v, name: check_count(v, name, minimum=0), "seed")
+_particles = _settings.argparse_type(_settings.check_particles, "particles")
+_positive_float = _settings.argparse_type(lambda v, name: check_positive(v, name, "metres"), "positive_float")
 
 
 def _wrap(text: str, width: int = 79) -> str:
@@ -547,7 +547,7 @@ def _run_settings(args, out: TextIO, err: TextIO) -> tuple[RunSettings, dict | N
     return settings, mapping
 
 
-_jsonable = _settings._jsonable
+_jsonable = _settings.jsonable
 
 
 def _cmd_map(args, out: TextIO, err: TextIO | None = None) -> int:

@@ -459,7 +459,17 @@ def read_log_file(path: Path, format: str | None = None, *, scan_topic: str | No
 
 def read_map_file(path: Path, format: str | None = None, *, not_free_is_occupied: bool = False,
                   warn: Callable[[str], None] | None = None) -> OccupancyGrid:
-    """Read a map (CMU 16-831 or ROS map_server, detected from the content)."""
+    """Read a map (CMU 16-831 or ROS map_server, detected from the content); its warnings go to ``warn``.
+
+    >>> from localize import io
+    >>> path = io.write_cmu_map(tmp_dir() / "m.dat", OccupancyGrid(np.zeros((4, 6)), 0.1))
+    >>> read_map_file(path).shape
+    (4, 6)
+    >>> read_map_file(path, not_free_is_occupied=True)
+    Traceback (most recent call last):
+    ...
+    ValueError: --not-free-is-occupied applies to ROS map_server maps only
+    """
     from . import io as lio
 
     kw = {"not_free": "occupied"} if not_free_is_occupied else {}
@@ -470,7 +480,13 @@ def read_map_file(path: Path, format: str | None = None, *, not_free_is_occupied
 
 
 def check_free_space(grid: OccupancyGrid, where: str) -> None:
-    """ValueError naming ``where`` if ``grid`` has no free cell to localize in."""
+    """ValueError naming ``where`` if ``grid`` has no free cell to localize in.
+
+    >>> check_free_space(OccupancyGrid(np.ones((2, 2)), 0.1), "walls.dat")
+    Traceback (most recent call last):
+    ...
+    ValueError: walls.dat: the map has no free cell to localize in (4 occupied, 0 unknown of 4 cells); check the map's format and thresholds (ROS maps: --not-free-is-occupied only adds obstacles)
+    """
     if not grid.free.any():
         raise ValueError(f"{where}: the map has no free cell to localize in ({grid.occupied.sum()} occupied, "
                          f"{grid.unknown.sum()} unknown of {grid.data.size} cells); check the map's format and "

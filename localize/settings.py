@@ -48,11 +48,12 @@ from ._checks import (
 
 __all__ = ["RunSettings", "DEFAULTS", "LEGACY_NAMES", "describe", "add_arguments", "from_namespace", "parse_options",
            "given_options",
-           "with_amcl", "setting_names"]
+           "with_amcl", "setting_names", "argparse_type", "check_particles", "jsonable"]
 
 
 # ============================================================================ checks (from localize._checks)
-def _particles(value: Any, name: str) -> int | str:
+def check_particles(value: Any, name: str) -> int | str:
+    """A number of particles (a whole number >= 1) or ``"auto"``."""
     if isinstance(value, str) and value.strip().lower() == "auto":
         return "auto"
     try:
@@ -145,11 +146,17 @@ def _params(value: Any, name: str) -> dict:
 
 def setting(default: Any, help: str, check: Callable[[Any, str], Any], *, unit: str = "", valid: str = "",
             flag: bool = True, metavar: Any = None, nargs: int | None = None, choices: tuple | None = None,
-            aliases: tuple[str, ...] = (), cli_help: str | None = None, cli_type: Callable | None = None) -> Any:
+            aliases: tuple[str, ...] = (), cli_help: str | None = None) -> Any:
     """A :class:`RunSettings` field: default, one-line ``help``, ``check`` (a :mod:`localize._checks` helper),
-    ``unit``, ``valid`` range (words), and how the command line shows it (``flag`` False: library only)."""
+    ``unit``, ``valid`` range (words), and how the command line shows it (``flag`` False: library only;
+    ``cli_help``: the ``--help`` paragraph, ``{default}`` replaced by the default).
+
+    >>> f = setting(0.5, "a threshold", check_probability, valid="[0, 1]")
+    >>> f.default, f.metadata["valid"], f.metadata["flag"]
+    (0.5, '[0, 1]', True)
+    """
     meta = dict(help=help, check=check, unit=unit, valid=valid, flag=flag, metavar=metavar, nargs=nargs,
-                choices=choices, aliases=aliases, cli_help=cli_help or help, cli_type=cli_type)
+                choices=choices, aliases=aliases, cli_help=cli_help or help)
     if isinstance(default, dict):
         return field(default_factory=lambda: dict(default), metadata=meta)
     return field(default=default, metadata=meta)
@@ -180,8 +187,8 @@ class RunSettings:
 
     particles: int | str = setting(
         "auto", "initial (with kld: largest) number of particles, or 'auto': one per KLD bin of the free space",
-        _particles, unit="particles", valid="whole number >= 1 or 'auto'", metavar="N",
-        cli_type=None, cli_help="""
+        check_particles, unit="particles", valid="whole number >= 1 or 'auto'", metavar="N",
+        cli_help="""
         number of particles at the start, or 'auto' (default {default}): one per 0.5 m x 0.5 m x 10 degree
         cell of the pose space over the map's free space (KLD-sampling's cells), between 20,000 and 300,000
         -- about 75,000 for 520 m^2 of free floor, 115,000 for 800 m^2. With --kld (on by default) this is
@@ -382,13 +389,18 @@ class RunSettings:
         >>> list(RunSettings().summary())[:3], RunSettings().summary()["alphas"]
         (['particles', 'sensor', 'beams'], [0.05, 0.01, 0.02, 0.05])
         """
-        return {f.name: _jsonable(getattr(self, f.name)) for f in fields(self)
+        return {f.name: jsonable(getattr(self, f.name)) for f in fields(self)
                 if f.metadata["flag"] and f.name != "track"}
 
 
-def _jsonable(v: Any) -> Any:
+def jsonable(v: Any) -> Any:
+    """``v`` as JSON holds it: tuples and lists as lists, other objects as their text.
+
+    >>> jsonable((0.2, (1, 2), None))
+    [0.2, [1, 2], None]
+    """
     if isinstance(v, (tuple, list)):
-        return [_jsonable(x) for x in v]
+        return [jsonable(x) for x in v]
     return v if isinstance(v, (int, float, str, bool)) or v is None else str(v)
 
 
@@ -403,7 +415,11 @@ LEGACY_NAMES: dict[str, str] = {"n_particles": "particles", "short_beams": "skip
 
 
 def setting_names(cli_only: bool = False) -> tuple[str, ...]:
-    """The names of the settings (``cli_only``: those with a command-line flag)."""
+    """The names of the settings (``cli_only``: those with a command-line flag).
+
+    >>> setting_names(cli_only=True)[-3:]
+    ('occupied_penalty', 'odometry_sign', 'track')
+    """
     return tuple(f.name for f in fields(RunSettings) if f.metadata["flag"] or not cli_only)
 
 
@@ -430,8 +446,17 @@ def _shown(value: Any) -> str:
 
 
 # ============================================================================ the command line
-def _argparse_type(check: Callable[[Any, str], Any], name: str) -> Callable[[str], Any]:
-    """An argparse ``type`` running ``check``; its message is the check's, "NAME must be" read "expected"."""
+def argparse_type(check: Callable[[Any, str], Any], name: str) -> Callable[[str], Any]:
+    """An argparse ``type`` running ``check(text, name)``; its message is the check's, "NAME must be" read "expected".
+
+    >>> parse = argparse_type(check_positive, "sigma_hit")
+    >>> parse("0.3")
+    0.3
+    >>> parse("0")
+    Traceback (most recent call last):
+    ...
+    argparse.ArgumentTypeError: expected a finite number > 0; got '0'
+    """
 
     def parse(text: str) -> Any:
         try:
@@ -471,12 +496,12 @@ def add_arguments(parser: Any) -> None:
             continue
         text = " ".join(m["cli_help"].split()).format(default=_shown(f.default))
         names = ["--" + f.name.replace("_", "-"), *m["aliases"]]
-        if f.type in ("bool",) or isinstance(f.default, bool):
+        if isinstance(f.default, bool):
             parser.add_argument(*names, dest=f.name, action="store_true", help=text)
             continue
         kw: dict[str, Any] = {k: m[k] for k in ("nargs", "metavar", "choices") if m[k] is not None}
         if m["choices"] is None:
-            kw["type"] = _argparse_type(_element_check(f), f.name)
+            kw["type"] = argparse_type(_element_check(f), f.name)
         parser.add_argument(*names, dest=f.name, default=f.default, help=text, **kw)
 
 
