@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from localize import cli, io, maps, sim
+from localize import cli, io, maps, pipeline, sim
 
 PARTICLES = 50_000
 
@@ -57,11 +57,11 @@ def run_cli(map_path: Path, log_path: Path, out: Path) -> dict:
 
 
 def run_march(map_path: Path, log_path: Path) -> dict:
-    """The same filter through cli.localize_log, the beam model ray marching (no table)."""
+    """The same filter through pipeline.localize_log, the beam model ray marching (no table)."""
     grid, log = io.read_map(map_path), io.read_log(log_path)
     wall, cpu = time.perf_counter(), time.process_time()
-    res = cli.localize_log(grid, log, PARTICLES, rng=np.random.default_rng(0), sensor="beam",
-                           sensor_params={"method": "march", "sigma_hit": 0.3})
+    res = pipeline.localize_log(grid, log, rng=np.random.default_rng(0), particles=PARTICLES, sensor="beam",
+                                sigma_hit=0.3, sensor_params={"method": "march"})
     return {"wall_s": time.perf_counter() - wall, "cpu_s": time.process_time() - cpu,
             "final_estimate": res.estimates[-1].tolist(), "scans_with_update": int(res.updated.sum()),
             "seconds_reading_files": 0.0, "convergence_step": None}

@@ -23,8 +23,8 @@ corrected pose at some scan within the first 30% of the run and stays within
 than 1 m off: the filter claiming to know where it is when it does not; and
 the runs whose state said ``localized`` more than 1 m off at *some* scan.
 
-Every run uses :func:`localize.cli.localize_log` with the keyword arguments
-that ``localize run``'s defaults stand for (:func:`localize.cli.run_kwargs`);
+Every run uses :func:`localize.pipeline.localize_log` with the settings of
+``localize run``'s defaults (:func:`localize.settings.parse_options`);
 ``--set name=value`` overrides one (experiments, never the reported table).
 """
 
@@ -36,6 +36,7 @@ import multiprocessing as mp
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +45,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 
-from localize import cli, io, mapping, sim  # noqa: E402
+from localize import io, mapping, pipeline, settings, sim  # noqa: E402
 from localize.geometry import angle_diff  # noqa: E402
 from localize.grid import OccupancyGrid  # noqa: E402
 
@@ -219,18 +220,19 @@ def prepare(job: dict):
     else:
         sub = log.select(slice(start, min(start + n_scans, len(log))))
     bad_map = grid if job.get("clean") else degrade_map(grid, map_rng)
-    kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-", *job.get("args", [])]),
-                        grid=bad_map)
-    kw.update(opts)
-    if isinstance(kw.get("kld"), list):
+    s = settings.parse_options(job.get("args", []))
+    s = replace(s, particles=pipeline.resolve_particles(s.particles, bad_map))
+    opts = dict(opts)
+    if isinstance(opts.get("kld"), list):
         from localize.kld import KLDSampling
-        e_, lo_, hi_ = kw["kld"]
-        kw["kld"] = KLDSampling(epsilon=e_, n_min=lo_, n_max=hi_)
-    if isinstance(kw.get("augmented"), list):
+        e_, lo_, hi_ = opts["kld"]
+        opts["kld"] = KLDSampling(epsilon=e_, n_min=lo_, n_max=hi_)
+    if isinstance(opts.get("augmented"), list):
         from localize.mcl import Augmented
-        kw["augmented"] = Augmented(*kw["augmented"])
-    if kw.pop("_unknown_not_obstacle", False):
+        opts["augmented"] = Augmented(*opts["augmented"])
+    if opts.pop("_unknown_not_obstacle", False):
         bad_map = OccupancyGrid(bad_map.data, bad_map.resolution, origin=bad_map.origin, unknown_is_obstacle=False)
+    kw = {"settings": pipeline.settings_with(s, **opts)}
     return bad_map, sub, kw
 
 
@@ -238,7 +240,7 @@ def run_one(job: dict) -> dict:
     name, start, seed = job["name"], job["start"], job["seed"]
     bad_map, sub, kw = prepare(job)
     t0 = time.perf_counter()
-    res = cli.localize_log(bad_map, sub, rng=np.random.default_rng(seed), **kw)
+    res = pipeline.localize_log(bad_map, sub, rng=np.random.default_rng(seed), **kw)
     wall = time.perf_counter() - t0
     j = judge(res.estimates, sub.poses)
     dur = float(sub.times[-1] - sub.times[0])
@@ -317,7 +319,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scans", type=int, default=300, help="scans per run, or to the end of the log (default 300)")
     ap.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                    help="override a localize_log keyword (experiments only), e.g. --set n_particles=20000")
+                    help="override a setting (localize.settings.RunSettings; experiments only), e.g. --set n_particles=20000")
     ap.add_argument("--args", default="", metavar="'OPTIONS'",
                     help="options of `localize run` for every run (experiments), e.g. --args '--particles 20000'")
     ap.add_argument("--clean-map", action="store_true", help="diagnostics: localize on the undegraded map")
@@ -339,7 +341,7 @@ def main(argv=None) -> int:
     opts = {}
     for kv in args.set:
         if "=" not in kv:
-            ap.error(f"--set expects NAME=VALUE (a localize_log keyword); got {kv!r}")
+            ap.error(f"--set expects NAME=VALUE (a setting of localize.settings.RunSettings, or an old localize_log keyword); got {kv!r}")
         k, v = kv.split("=", 1)
         try:
             opts[k] = json.loads(v)          # numbers, lists, true/false ...

@@ -37,7 +37,7 @@ sys.path.insert(0, str(HERE))
 import bench_global as bg  # noqa: E402
 
 from localize import smooth  # noqa: E402
-from localize.mcl import RunTrace  # noqa: E402
+from localize.runloop import RunTrace  # noqa: E402
 
 _KEEP = ("poses", "means", "stds", "spread", "best_weight", "n_eff", "n_particles", "n_injected", "p_inject",
          "updated", "resampled", "degenerate", "n_valid", "fit", "on_map", "state")
@@ -62,9 +62,9 @@ def _load(path: Path) -> tuple[RunTrace, RunTrace]:
 
 
 def _fit_for(bad_map, sub, kw):
-    sigma = (kw.get("sensor_params") or {}).get("sigma_hit", 0.3)
-    return smooth.scan_fit_function(bad_map, sub, 2.0 * float(sigma), min_range=float(kw.get("min_range") or 0.0),
-                                    max_range=kw.get("max_range"))
+    s = kw["settings"]
+    return smooth.scan_fit_function(bad_map, sub, 2.0 * s.sigma_hit, min_range=float(s.min_range or 0.0),
+                                    max_range=s.max_range)
 
 
 def _job_file(cache: Path, job: dict) -> Path:

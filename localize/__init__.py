@@ -50,9 +50,10 @@ _LAZY_NAMES = {
     "UKFLocalizer": "ekf",
 }
 _SUBMODULES = (
-    "beam_learning", "check", "cli", "compare", "diagnostics", "discrete", "ekf", "geometry", "grid", "gridloc",
-    "histogram", "io", "kld", "mapping", "maps", "mcl", "metrics", "motion", "multiscale", "plot", "raycast",
-    "resample", "scanmatch", "sensors", "sim", "smooth", "widgets",
+    "beam_learning", "check", "cli", "compare", "diagnostics", "discrete", "ekf", "estimate", "evidence",
+    "geometry", "grid", "gridloc", "histogram", "io", "kld", "mapping", "maps", "mcl", "metrics", "motion",
+    "multiscale", "pipeline", "plot", "policies", "raycast", "resample", "runloop", "scanmatch", "sensors",
+    "settings", "sim", "smooth", "widgets",
 )
 
 __all__ = ["OccupancyGrid", "wrap_angle", "__version__", *_LAZY_NAMES]

@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from .geometry import as_poses
 
 __all__ = ["PoseShapeWarning", "check_poses", "check_rng", "check_number", "check_positive", "check_nonnegative",
-           "check_probability", "check_count", "check_alphas", "check_max_range", "check_angles", "check_grid", "check_sensor_poses"]
+           "check_probability", "check_interval", "check_choice", "check_count", "check_alphas", "check_max_range", "check_angles", "check_grid", "check_sensor_poses"]
 
 #: Radians of round-off allowed beyond 2 pi before beam angles are taken for degrees.
 ANGLE_SLACK = 1e-9
@@ -117,6 +117,38 @@ def check_probability(value: Any, name: str) -> float:
     return v
 
 
+def check_interval(value: Any, name: str, low: float, high: float, *, open_low: bool = False,
+                   open_high: bool = False, what: str = "a number") -> float:
+    """``value`` as a float between ``low`` and ``high`` (``open_low`` / ``open_high``: that end excluded).
+
+    >>> check_interval(0.3, "temper", 0, 1, open_low=True)
+    0.3
+    >>> check_interval(1, "injection", 0, 1, open_high=True, what="a fraction")
+    Traceback (most recent call last):
+    ...
+    ValueError: injection must be a fraction in [0, 1); got 1
+    """
+    v = _as_float(value, name, what)
+    inside = (v > low if open_low else v >= low) and (v < high if open_high else v <= high)
+    if not (math.isfinite(v) and inside):
+        span = f"{'(' if open_low else '['}{low:g}, {high:g}{')' if open_high else ']'}"
+        raise ValueError(f"{name} must be {what} in {span}; got {value!r}")
+    return v
+
+
+def check_choice(value: Any, name: str, choices: tuple[str, ...]) -> str:
+    """``value`` if it is one of the strings ``choices``.
+
+    >>> check_choice("sonar", "sensor", ("likelihood", "beam"))
+    Traceback (most recent call last):
+    ...
+    ValueError: sensor must be one of likelihood, beam; got 'sonar'
+    """
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {', '.join(choices)}; got {value!r}")
+    return value
+
+
 def check_count(value: Any, name: str, minimum: int = 1) -> int:
     """``value`` as an ``int >= minimum``; a float is accepted only if it is whole (``1e4``).
 
@@ -182,9 +214,8 @@ def check_angles(angles: ArrayLike, name: str = "angles") -> NDArray[np.float64]
 
 def check_grid(grid: Any, name: str = "grid"):
     """``grid`` itself if it is a :class:`localize.OccupancyGrid`, else ``TypeError``."""
-    from .grid import OccupancyGrid  # grid.py imports this module
-
-    if not isinstance(grid, OccupancyGrid):
+    # by name: grid.py imports this module, and this one, imported by every layer, imports none of them
+    if not any(c.__name__ == "OccupancyGrid" and c.__module__ == "localize.grid" for c in type(grid).__mro__):
         raise TypeError(f"{name} must be a localize.OccupancyGrid (see localize.maps); got {type(grid).__name__}")
     return grid
 

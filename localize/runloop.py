@@ -476,7 +476,7 @@ def run_filter(
 ) -> RunTrace:
     """The one run driver: filter a sequence of controls and scans, with update gating and an honest state.
 
-    The command line (:func:`localize.cli.localize_log`), the book's chapters
+    The command line (:func:`localize.pipeline.localize_log`), the book's chapters
     and :func:`run_mcl` all run their filters through this loop. At step
     ``k``:
 

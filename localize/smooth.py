@@ -18,8 +18,8 @@ odometry pair ``(odometry[k+1], odometry[k])`` *is* the inverse relative pose,
 a robot driving backwards, which :class:`localize.mcl.ReversibleOdometry`
 (the command line's motion model) moves correctly (a backward motion is the
 forward motion of a robot turned by 180 degrees). Both passes are the one run
-driver, :func:`localize.mcl.run_filter`, through
-:func:`localize.cli.localize_log`, with the same settings.
+driver, :func:`localize.runloop.run_filter`, through
+:func:`localize.pipeline.localize_log`, with the same settings.
 
 The combination (:func:`combine`), at every scan, from the passes' own honest
 states (``searching`` / ``localized`` / ``lost``):
@@ -31,7 +31,7 @@ states (``searching`` / ``localized`` / ``lost``):
   side (there, each pass's place carried on by the odometry from the
   stretch's ends) by their scan fit: the share of beams whose reading agrees with the
   range ray-cast in the map from the estimate (the run driver's fit, see
-  :class:`localize.mcl.StateRules`; a wrong place lets beams pass through
+  :class:`localize.policies.StateRules`; a wrong place lets beams pass through
   walls). The pass whose fit is better by at least ``min_z`` standard errors
   of the paired per-scan differences wins. If neither does, the stretch is
   *ambiguous*: the scans cannot tell the two places apart, so the state there
@@ -79,11 +79,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._checks import check_count, check_nonnegative, check_positive
-from .cli import DEFAULTS, RunResult, check_log_odometry, localize_log
-from .evidence import scan_fit
-from .geometry import angle_diff, compose, relative, wrap_angle
+from .geometry import angle_diff, circular_mean, compose, relative
 from .grid import OccupancyGrid
+from .evidence import scan_fit
 from .runloop import RunTrace, StateTrack, _intervals
+from .pipeline import RunResult, check_log_odometry, localize_log, settings_with
+from .settings import RunSettings
 
 __all__ = ["PASSES", "Smoothed", "SmoothResult", "reverse_log", "reverse_trace", "combine", "scan_fit_function",
            "smoothed_trace", "smooth_log", "headline"]
@@ -116,13 +117,13 @@ def reverse_log(log):
 
 
 def reverse_trace(trace: RunTrace) -> RunTrace:
-    """A :class:`~localize.mcl.RunTrace` of a reversed log turned back into the log's own scan order.
+    """A :class:`~localize.runloop.RunTrace` of a reversed log turned back into the log's own scan order.
 
     Every per-scan array (each array field of length ``T``) is flipped; an event of step ``k`` becomes one of
     scan ``T - 1 - k``; snapshots are renumbered the same way.
     """
     if not isinstance(trace, RunTrace):
-        raise TypeError(f"trace must be a localize.mcl.RunTrace; got {type(trace).__name__}")
+        raise TypeError(f"trace must be a localize.runloop.RunTrace; got {type(trace).__name__}")
     t = len(trace)
     flipped = {f.name: np.ascontiguousarray(getattr(trace, f.name)[::-1]) for f in fields(trace)
                if isinstance(getattr(trace, f.name), np.ndarray) and getattr(trace, f.name).shape[:1] == (t,)}
@@ -289,169 +290,21 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
     >>> [str(v) for v in s.passes[:2]], str(s.state[0]), s.first_localized()
     (['backward', 'backward'], 'localized', 0)
     """
-    for name, tr in (("forward", forward), ("backward", backward)):
-        if not isinstance(tr, RunTrace):
-            raise TypeError(f"{name} must be a localize.mcl.RunTrace (what run_filter returns); got "
-                            f"{type(tr).__name__}")
-    if len(forward) != len(backward):
-        raise ValueError(f"the passes cover different logs: forward has {len(forward)} scans, backward "
-                         f"{len(backward)} (reverse the backward pass's trace with reverse_trace)")
+    odo = _check_passes(forward, backward, odometry)
     d_max = check_positive(agree_distance, "agree_distance", "m")
     a_max = check_positive(agree_heading, "agree_heading", "rad")
     window = check_count(window, "window", minimum=0)
-    min_z = check_nonnegative(min_z, "min_z")
-    min_gain = check_nonnegative(min_gain, "min_gain")
-    odo = None
-    if odometry is not None:
-        odo = np.asarray(odometry, dtype=float)
-        if odo.shape != (len(forward), 3):
-            raise ValueError(f"odometry must have shape ({len(forward)}, 3), one pose per scan; got {odo.shape}")
-    t = len(forward)
-    fl, bl = forward.state == "localized", backward.state == "localized"
-    pf, pb = forward.poses, backward.poses
-    dist = np.hypot(pf[:, 0] - pb[:, 0], pf[:, 1] - pb[:, 1])
-    dth = np.abs(angle_diff(pf[:, 2], pb[:, 2]))
-    agree = fl & bl & (dist <= d_max) & (dth <= a_max)
-    passes = np.full(t, "none", dtype="<U8")
-    passes[fl & ~bl] = "forward"
-    passes[bl & ~fl] = "backward"
-    passes[fl & bl] = "disagree"
-    passes[agree] = "both"
+    test = _PairedTest(check_nonnegative(min_z, "min_z"), check_nonnegative(min_gain, "min_gain"))
+    agree, passes = _classify(forward, backward, d_max, a_max)
     source = np.where(passes == "disagree", "", passes).astype("<U8")
-
-    disagreements = []
+    t = len(forward)
     ambiguous = np.zeros(t, dtype=bool)
     distrusted = np.zeros(t, dtype=bool)
-    for a, b in _intervals(passes == "disagree"):
-        scans = np.arange(a, b + 1)
-        row: dict[str, Any] = {"scans": [a, b]}
-        verdict = None
-        if fit is not None:
-            # the two trajectories compared on the scans of the stretch and `window` scans either side (where a
-            # pass's look-alike place shows itself, the other pass may not be localized yet)
-            if odo is not None:
-                # beyond the stretch, each pass's place is carried on by the odometry from the stretch's ends
-                # (a pass still searching there is not held against its place)
-                near = np.arange(max(a - window, 0), min(b + window, t - 1) + 1)
-                hf, hb = _continue(pf, odo, near, a, b), _continue(pb, odo, near, a, b)
-            else:                     # without odometry, only the stretch itself compares like with like
-                near = scans
-                hf, hb = pf[near], pb[near]
-            ff, fb = fit(hf, near), fit(hb, near)
-            ok = np.isfinite(ff) & np.isfinite(fb)
-            d = fb[ok] - ff[ok]
-            row.update(compared_scans=[int(near[0]), int(near[-1])], fit_forward=_round(np.mean(ff[ok]) if ok.any()
-                                                                                         else np.nan),
-                       fit_backward=_round(np.mean(fb[ok]) if ok.any() else np.nan))
-            if d.size >= 2:
-                mean, z = _paired_z(d)
-                row["fit_z"] = _z_shown(z)
-                if abs(z) >= min_z and abs(mean) >= min_gain:
-                    verdict = "backward" if mean > 0 else "forward"
-        if verdict is not None:
-            chosen, why = verdict, "its estimates fit the scans better"
-        else:
-            # a tie: the scans cannot tell the two places apart. The pass localized longer going into the stretch
-            # gives the estimate (forward counts back from a, backward on from b), but the state is not localized
-            run_f = _run_length(fl[:a + 1][::-1])
-            run_b = _run_length(bl[b:])
-            chosen = "forward" if run_f >= run_b else "backward"
-            why = ("ambiguous: the scans fit both places equally well (state not localized here); the estimate is "
-                   "that of the pass localized longer going into the stretch")
-            ambiguous[scans] = True
-        row.update(chosen=chosen, reason=why)
-        source[scans] = chosen
-        if verdict is not None:
-            # the losing pass followed a wrong place through the whole of its localized stretch: it is not
-            # trusted where it alone is localized on that stretch (the winner's estimate is used, not localized)
-            loser = "forward" if verdict == "backward" else "backward"
-            lp = pf if verdict == "backward" else pb
-            # the scans next to the stretch where the loser alone is localized (a scan where both agree ends it)
-            only = passes == loser
-            lo_, hi_ = a - _run_length(only[:a][::-1]), b + _run_length(only[b + 1:])
-            if odo is not None:
-                # ... as long as it follows that place: a jump against the odometry is a new hypothesis
-                jump = _jumps(lp, odo, d_max)
-                lo_ = a - _run_length(~jump[lo_ + 1:a + 1][::-1])
-                hi_ = b + _run_length(~jump[b + 1:hi_ + 1])
-            alone = np.concatenate([np.arange(lo_, a), np.arange(b + 1, hi_ + 1)]).astype(int)
-            if alone.size:
-                source[alone] = verdict
-                distrusted[alone] = True
-                row["distrusted_scans"] = [[int(x), int(y)] for x, y in _intervals(np.isin(np.arange(t), alone))]
-        disagreements.append(row)
-
-    overruled = []
-    if fit is not None:
-        # a pass localized alone where the other pass's estimate, not localized, fits the scans clearly better
-        # (by the same paired test): the lone pass may have settled on a look-alike place, e.g. after a restart,
-        # while the other one's cloud already leans to the right place. No claim there; the better estimate.
-        for who, other in (("forward", "backward"), ("backward", "forward")):
-            mine_p, other_p = (pf, pb) if who == "forward" else (pb, pf)
-            # a pass still searching (never localized so far in its own time direction) has no place to offer:
-            # its estimate is the best of a fresh cloud on the few scans it has seen, and fits them by selection
-            other_searching = (backward if who == "forward" else forward).state == "searching"
-            for a, b in _intervals((passes == who) & ~distrusted & ~other_searching):
-                scans = np.arange(a, b + 1)
-                fm, fo = fit(mine_p[scans], scans), fit(other_p[scans], scans)
-                ok = np.isfinite(fm) & np.isfinite(fo)
-                d = fo[ok] - fm[ok]
-                if d.size < 2:
-                    continue
-                mean, z = _paired_z(d)
-                if mean >= min_gain and z >= min_z:
-                    distrusted[scans] = True
-                    source[scans] = other
-                    overruled.append({"scans": [a, b], "pass": who, f"fit_{who}": _round(np.mean(fm[ok])),
-                                      f"fit_{other}": _round(np.mean(fo[ok])),
-                                      "fit_z": _z_shown(z)})
-
-    poses = np.array(pf, dtype=float, copy=True)
-    stds = np.array(forward.stds, dtype=float, copy=True)
-    spread = np.array(forward.spread, dtype=float, copy=True)
-    # where neither pass is localized, the estimate of the pass localized more recently in its own time direction
-    # (forward: last localized scan before, backward: first one after), whose place is the fresher
-    idx = np.arange(t)
-    since_f = idx - np.maximum.accumulate(np.where(fl, idx, -np.inf))          # inf: never localized so far
-    until_b = np.minimum.accumulate(np.where(bl, idx, np.inf)[::-1])[::-1] - idx
-    none = source == "none"
-    b_none = none & (until_b < since_f)
-    if fit is not None and none.any():
-        # ... unless the scans say otherwise: the estimate that fits the scans better (over 5 neighbouring scans)
-        ks = np.flatnonzero(none)
-        diff = np.zeros(t)
-        with np.errstate(invalid="ignore"):
-            dk = fit(pb[ks], ks) - fit(pf[ks], ks)
-        # ... between places only: a pass still searching there is not compared (see the overruling above)
-        dk[(forward.state[ks] == "searching") | (backward.state[ks] == "searching")] = np.nan
-        diff[ks] = np.where(np.isfinite(dk), dk, 0.0)
-        for a, b in _intervals(none):
-            seg = diff[a:b + 1]
-            c = np.concatenate([[0.0], np.cumsum(seg)])
-            i = np.arange(seg.size)
-            sm = c[np.minimum(i + 3, seg.size)] - c[np.maximum(i - 2, 0)]       # sum over scans i-2 .. i+2
-            decided = np.abs(sm) > 1e-9
-            b_none[a:b + 1] = np.where(decided, sm > 0, b_none[a:b + 1])
-        f_search, b_search = forward.state == "searching", backward.state == "searching"
-        b_none[none & b_search & ~f_search] = False     # the scans never choose a place a pass has not found yet
-        b_none[none & f_search & ~b_search] = True
-    take_b = (source == "backward") | b_none
-    poses[take_b], stds[take_b], spread[take_b] = pb[take_b], backward.stds[take_b], backward.spread[take_b]
-    if agree.any():
-        sf = np.maximum(np.nan_to_num(forward.spread[agree], nan=1.0), 0.01)
-        sb = np.maximum(np.nan_to_num(backward.spread[agree], nan=1.0), 0.01)
-        wf, wb = 1.0 / sf ** 2, 1.0 / sb ** 2
-        wsum = wf + wb
-        xy = (pf[agree, :2] * wf[:, None] + pb[agree, :2] * wb[:, None]) / wsum[:, None]
-        th = np.arctan2(wf * np.sin(pf[agree, 2]) + wb * np.sin(pb[agree, 2]),
-                        wf * np.cos(pf[agree, 2]) + wb * np.cos(pb[agree, 2]))
-        poses[agree, :2], poses[agree, 2] = xy, wrap_angle(th)
-        spread[agree] = 1.0 / np.sqrt(wsum)
-        with np.errstate(divide="ignore"):
-            vf = np.maximum(forward.stds[agree] ** 2, 1e-12)
-            vb = np.maximum(backward.stds[agree] ** 2, 1e-12)
-        stds[agree] = np.sqrt(1.0 / (1.0 / vf + 1.0 / vb))
-
+    disagreements = [_settle(forward, backward, (a, b), fit, odo, window, test, passes, source, ambiguous,
+                             distrusted, d_max) for a, b in _intervals(passes == "disagree")]
+    overruled = [] if fit is None else _overrule(forward, backward, fit, test, passes, source, distrusted)
+    take_b = (source == "backward") | _backward_where_none(forward, backward, fit, source)
+    poses, stds, spread = _estimates(forward, backward, take_b, agree)
     loc = (source != "none") & ~ambiguous & ~distrusted
     state = np.where(loc, "localized", "searching").astype("<U9")
     seen = np.cumsum(loc) > 0
@@ -460,6 +313,224 @@ def combine(forward: RunTrace, backward: RunTrace, fit: Callable[[NDArray, NDArr
                     forward=forward, backward=backward, disagreements=disagreements, overruled=overruled,
                     agree_distance=float(d_max),
                     agree_heading=float(a_max), from_backward=take_b & ~agree)
+
+
+def _check_passes(forward: RunTrace, backward: RunTrace, odometry: NDArray | None) -> NDArray | None:
+    """Check that the passes are traces of one log; the odometry as a float array (or None)."""
+    for name, tr in (("forward", forward), ("backward", backward)):
+        if not isinstance(tr, RunTrace):
+            raise TypeError(f"{name} must be a localize.runloop.RunTrace (what run_filter returns); got "
+                            f"{type(tr).__name__}")
+    if len(forward) != len(backward):
+        raise ValueError(f"the passes cover different logs: forward has {len(forward)} scans, backward "
+                         f"{len(backward)} (reverse the backward pass's trace with reverse_trace)")
+    if odometry is None:
+        return None
+    odo = np.asarray(odometry, dtype=float)
+    if odo.shape != (len(forward), 3):
+        raise ValueError(f"odometry must have shape ({len(forward)}, 3), one pose per scan; got {odo.shape}")
+    return odo
+
+
+def _classify(forward: RunTrace, backward: RunTrace, d_max: float, a_max: float) -> tuple[NDArray, NDArray]:
+    """``(agree, passes)``: where both passes are localized and close, and the ``passes`` label of each scan."""
+    fl, bl = forward.state == "localized", backward.state == "localized"
+    pf, pb = forward.poses, backward.poses
+    dist = np.hypot(pf[:, 0] - pb[:, 0], pf[:, 1] - pb[:, 1])
+    dth = np.abs(angle_diff(pf[:, 2], pb[:, 2]))
+    agree = fl & bl & (dist <= d_max) & (dth <= a_max)
+    passes = np.full(len(forward), "none", dtype="<U8")
+    passes[fl & ~bl] = "forward"
+    passes[bl & ~fl] = "backward"
+    passes[fl & bl] = "disagree"
+    passes[agree] = "both"
+    return agree, passes
+
+
+@dataclass(frozen=True)
+class _PairedTest:
+    """A pass wins when the mean per-scan gain in scan fit is at least ``min_z`` standard errors and ``min_gain``."""
+
+    min_z: float
+    min_gain: float
+
+    def wins(self, mean: float, z: float, two_sided: bool = True) -> bool:
+        if two_sided:
+            return abs(z) >= self.min_z and abs(mean) >= self.min_gain
+        return mean >= self.min_gain and z >= self.min_z
+
+
+def _settle(forward: RunTrace, backward: RunTrace, stretch: tuple[int, int], fit: Callable | None,
+            odo: NDArray | None, window: int, test: _PairedTest, passes: NDArray, source: NDArray,
+            ambiguous: NDArray, distrusted: NDArray, d_max: float) -> dict:
+    """Settle one stretch of ``disagree`` scans (``source``, ``ambiguous``, ``distrusted`` are set); its row."""
+    a, b = stretch
+    scans = np.arange(a, b + 1)
+    row: dict[str, Any] = {"scans": [a, b]}
+    verdict = None if fit is None else _compare_stretch(forward.poses, backward.poses, fit, odo, a, b, window,
+                                                        test, row)
+    if verdict is not None:
+        chosen, why = verdict, "its estimates fit the scans better"
+    else:
+        # a tie: the scans cannot tell the two places apart. The pass localized longer going into the stretch
+        # gives the estimate (forward counts back from a, backward on from b), but the state is not localized
+        run_f = _run_length((forward.state == "localized")[:a + 1][::-1])
+        run_b = _run_length((backward.state == "localized")[b:])
+        chosen = "forward" if run_f >= run_b else "backward"
+        why = ("ambiguous: the scans fit both places equally well (state not localized here); the estimate is "
+               "that of the pass localized longer going into the stretch")
+        ambiguous[scans] = True
+    row.update(chosen=chosen, reason=why)
+    source[scans] = chosen
+    if verdict is not None:
+        alone = _loser_alone(forward, backward, verdict, a, b, odo, passes, d_max)
+        if alone.size:
+            source[alone] = verdict
+            distrusted[alone] = True
+            t = len(passes)
+            row["distrusted_scans"] = [[int(x), int(y)] for x, y in _intervals(np.isin(np.arange(t), alone))]
+    return row
+
+
+def _compare_stretch(pf: NDArray, pb: NDArray, fit: Callable, odo: NDArray | None, a: int, b: int, window: int,
+                     test: _PairedTest, row: dict) -> str | None:
+    """The pass whose estimates fit the scans of the stretch ``a..b`` clearly better (None: a tie); ``row`` gets
+    the compared scans, both mean fits and the z-score."""
+    t = len(pf)
+    # the two trajectories compared on the scans of the stretch and `window` scans either side (where a
+    # pass's look-alike place shows itself, the other pass may not be localized yet)
+    if odo is not None:
+        # beyond the stretch, each pass's place is carried on by the odometry from the stretch's ends
+        # (a pass still searching there is not held against its place)
+        near = np.arange(max(a - window, 0), min(b + window, t - 1) + 1)
+        hf, hb = _continue(pf, odo, near, a, b), _continue(pb, odo, near, a, b)
+    else:                     # without odometry, only the stretch itself compares like with like
+        near = np.arange(a, b + 1)
+        hf, hb = pf[near], pb[near]
+    ff, fb = fit(hf, near), fit(hb, near)
+    ok = np.isfinite(ff) & np.isfinite(fb)
+    d = fb[ok] - ff[ok]
+    row.update(compared_scans=[int(near[0]), int(near[-1])], fit_forward=_round(np.mean(ff[ok]) if ok.any()
+                                                                                 else np.nan),
+               fit_backward=_round(np.mean(fb[ok]) if ok.any() else np.nan))
+    if d.size < 2:
+        return None
+    mean, z = _paired_z(d)
+    row["fit_z"] = _z_shown(z)
+    if test.wins(mean, z):
+        return "backward" if mean > 0 else "forward"
+    return None
+
+
+def _loser_alone(forward: RunTrace, backward: RunTrace, verdict: str, a: int, b: int, odo: NDArray | None,
+                 passes: NDArray, d_max: float) -> NDArray:
+    """The scans next to the stretch ``a..b`` where the losing pass alone is localized, following its place.
+
+    The losing pass followed a wrong place through the whole of its localized stretch: it is not trusted
+    where it alone is localized on that stretch (the winner's estimate is used, not localized). A scan where
+    both agree ends it; with odometry, so does a jump against the odometry (a new hypothesis).
+    """
+    loser = "forward" if verdict == "backward" else "backward"
+    lp = forward.poses if verdict == "backward" else backward.poses
+    only = passes == loser
+    lo_, hi_ = a - _run_length(only[:a][::-1]), b + _run_length(only[b + 1:])
+    if odo is not None:
+        jump = _jumps(lp, odo, d_max)
+        lo_ = a - _run_length(~jump[lo_ + 1:a + 1][::-1])
+        hi_ = b + _run_length(~jump[b + 1:hi_ + 1])
+    return np.concatenate([np.arange(lo_, a), np.arange(b + 1, hi_ + 1)]).astype(int)
+
+
+def _overrule(forward: RunTrace, backward: RunTrace, fit: Callable, test: _PairedTest, passes: NDArray,
+              source: NDArray, distrusted: NDArray) -> list[dict]:
+    """Stretches where a pass localized alone is overruled (``source`` and ``distrusted`` are set); their rows.
+
+    A pass localized alone where the other pass's estimate, not localized, fits the scans clearly better (by
+    the same paired test): the lone pass may have settled on a look-alike place, e.g. after a restart, while the
+    other one's cloud already leans to the right place. No claim there; the better estimate.
+    """
+    overruled = []
+    pf, pb = forward.poses, backward.poses
+    for who, other in (("forward", "backward"), ("backward", "forward")):
+        mine_p, other_p = (pf, pb) if who == "forward" else (pb, pf)
+        # a pass still searching (never localized so far in its own time direction) has no place to offer:
+        # its estimate is the best of a fresh cloud on the few scans it has seen, and fits them by selection
+        other_searching = (backward if who == "forward" else forward).state == "searching"
+        for a, b in _intervals((passes == who) & ~distrusted & ~other_searching):
+            scans = np.arange(a, b + 1)
+            fm, fo = fit(mine_p[scans], scans), fit(other_p[scans], scans)
+            ok = np.isfinite(fm) & np.isfinite(fo)
+            d = fo[ok] - fm[ok]
+            if d.size < 2:
+                continue
+            mean, z = _paired_z(d)
+            if test.wins(mean, z, two_sided=False):
+                distrusted[scans] = True
+                source[scans] = other
+                overruled.append({"scans": [a, b], "pass": who, f"fit_{who}": _round(np.mean(fm[ok])),
+                                  f"fit_{other}": _round(np.mean(fo[ok])), "fit_z": _z_shown(z)})
+    return overruled
+
+
+def _backward_where_none(forward: RunTrace, backward: RunTrace, fit: Callable | None, source: NDArray) -> NDArray:
+    """Scans localized by neither pass whose estimate is the backward pass's.
+
+    The estimate of the pass localized more recently in its own time direction (forward: last localized scan
+    before, backward: first one after), whose place is the fresher -- unless the scans say otherwise: the
+    estimate that fits the scans better over 5 neighbouring scans.
+    """
+    t = len(forward)
+    fl, bl = forward.state == "localized", backward.state == "localized"
+    idx = np.arange(t)
+    since_f = idx - np.maximum.accumulate(np.where(fl, idx, -np.inf))          # inf: never localized so far
+    until_b = np.minimum.accumulate(np.where(bl, idx, np.inf)[::-1])[::-1] - idx
+    none = source == "none"
+    b_none = none & (until_b < since_f)
+    if fit is None or not none.any():
+        return b_none
+    ks = np.flatnonzero(none)
+    diff = np.zeros(t)
+    with np.errstate(invalid="ignore"):
+        dk = fit(backward.poses[ks], ks) - fit(forward.poses[ks], ks)
+    # ... between places only: a pass still searching there is not compared (see _overrule)
+    dk[(forward.state[ks] == "searching") | (backward.state[ks] == "searching")] = np.nan
+    diff[ks] = np.where(np.isfinite(dk), dk, 0.0)
+    for a, b in _intervals(none):
+        seg = diff[a:b + 1]
+        c = np.concatenate([[0.0], np.cumsum(seg)])
+        i = np.arange(seg.size)
+        sm = c[np.minimum(i + 3, seg.size)] - c[np.maximum(i - 2, 0)]       # sum over scans i-2 .. i+2
+        decided = np.abs(sm) > 1e-9
+        b_none[a:b + 1] = np.where(decided, sm > 0, b_none[a:b + 1])
+    f_search, b_search = forward.state == "searching", backward.state == "searching"
+    b_none[none & b_search & ~f_search] = False     # the scans never choose a place a pass has not found yet
+    b_none[none & f_search & ~b_search] = True
+    return b_none
+
+
+def _estimates(forward: RunTrace, backward: RunTrace, take_b: NDArray, agree: NDArray
+               ) -> tuple[NDArray, NDArray, NDArray]:
+    """``(poses, stds, spread)``: the backward pass's where ``take_b``, the forward pass's elsewhere, and where
+    both agree their mean weighted by the inverse squared spreads (headings: :func:`~localize.geometry.circular_mean`)."""
+    pf, pb = forward.poses, backward.poses
+    poses = np.array(pf, dtype=float, copy=True)
+    stds = np.array(forward.stds, dtype=float, copy=True)
+    spread = np.array(forward.spread, dtype=float, copy=True)
+    poses[take_b], stds[take_b], spread[take_b] = pb[take_b], backward.stds[take_b], backward.spread[take_b]
+    if agree.any():
+        sf = np.maximum(np.nan_to_num(forward.spread[agree], nan=1.0), 0.01)
+        sb = np.maximum(np.nan_to_num(backward.spread[agree], nan=1.0), 0.01)
+        wf, wb = 1.0 / sf ** 2, 1.0 / sb ** 2
+        wsum = wf + wb
+        xy = (pf[agree, :2] * wf[:, None] + pb[agree, :2] * wb[:, None]) / wsum[:, None]
+        th = circular_mean(np.stack([pf[agree, 2], pb[agree, 2]], axis=-1), np.stack([wf, wb], axis=-1))
+        poses[agree, :2], poses[agree, 2] = xy, th
+        spread[agree] = 1.0 / np.sqrt(wsum)
+        with np.errstate(divide="ignore"):
+            vf = np.maximum(forward.stds[agree] ** 2, 1e-12)
+            vb = np.maximum(backward.stds[agree] ** 2, 1e-12)
+        stds[agree] = np.sqrt(1.0 / (1.0 / vf + 1.0 / vb))
+    return poses, stds, spread
 
 
 def _continue(p: NDArray, odo: NDArray, scans: NDArray, a: int, b: int) -> NDArray:
@@ -518,7 +589,7 @@ def _round(v: float, digits: int = 3) -> float | None:
 
 
 def smoothed_trace(s: Smoothed) -> RunTrace:
-    """The combined trajectory as a :class:`~localize.mcl.RunTrace` (for the CLI's outputs and ``state`` summary).
+    """The combined trajectory as a :class:`~localize.runloop.RunTrace` (for the CLI's outputs and ``state`` summary).
 
     Per-scan evidence the combination does not redefine (``n_valid``,
     ``degenerate``, ...) is the forward pass's; events are the forward pass's
@@ -545,7 +616,7 @@ def smoothed_trace(s: Smoothed) -> RunTrace:
 
 @dataclass
 class SmoothResult(RunResult):
-    """:class:`localize.cli.RunResult` of a smoothed run (see :func:`smooth_log`): the combined trajectory.
+    """:class:`localize.pipeline.RunResult` of a smoothed run (see :func:`smooth_log`): the combined trajectory.
 
     ``smooth`` is the :class:`Smoothed` record, ``columns`` the extra per-scan
     columns of ``trajectory.csv`` (``passes``, ``source``), ``forward`` and
@@ -571,20 +642,21 @@ class _Offset:
         self.progress.update_to(self.offset + done)
 
 
-def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: Any = None,
-               agree_distance: float = 0.5, agree_heading: float = float(np.radians(10.0)),
-               fit_distance: float | None = None, **kwargs: Any):
+def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, settings: RunSettings | None = None,
+               progress: Any = None, agree_distance: float = 0.5, agree_heading: float = float(np.radians(10.0)),
+               fit_distance: float | None = None, snapshot_every: int = 0, **changes: Any):
     """Localize a recorded log forwards and backwards and combine the passes (``localize run --smooth``).
 
-    Both passes are :func:`localize.cli.localize_log` with the same keyword
-    arguments (``kwargs``: particles, sensor, alphas, ...), the backward one
-    on :func:`reverse_log`; they share ``rng`` (forward first), so a seed
+    Both passes are :func:`localize.pipeline.localize_log` with the same
+    ``settings`` (:class:`~localize.settings.RunSettings`, with ``changes`` by
+    keyword: ``particles``, ``sensor``, ``alphas``, ...), the backward one on
+    :func:`reverse_log`; they share ``rng`` (forward first), so a seed
     reproduces the result. ``fit_distance`` (default twice the sensor's
     ``sigma_hit``) is the scan-fit tolerance that settles disagreements.
 
     Returns
     -------
-    localize.cli.RunResult
+    localize.pipeline.RunResult
         The combined trajectory (``estimates``, ``state``, ``trace`` as for one
         pass), with ``smooth`` (the :class:`Smoothed` record) and ``columns``
         (the per-scan ``passes`` and ``source`` columns of ``trajectory.csv``).
@@ -596,32 +668,25 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, progress: 
         raise ValueError(f"--smooth needs a log of at least 2 scans to run backwards; this one has {len(log)}")
     check_positive(agree_distance, "agree_distance", "m")
     check_positive(agree_heading, "agree_heading", "rad")
+    s = settings_with(settings, **changes)
     n = len(log)
     if progress is not None and hasattr(progress, "total"):
         progress.total = 2 * n
     # the odometry's signs are checked once, on the log as recorded (played backwards, every step of an
     # odometry without a sign reads as reversing); both passes then trust the corrected log
-    log, sign_check = check_log_odometry(log, kwargs.pop("odometry_sign", DEFAULTS["odometry_sign"]),
-                                         min_range=kwargs.get("min_range", DEFAULTS["min_range"]))
-    kwargs["odometry_sign"] = "trust"
-    fw = localize_log(grid, log, rng=rng, progress=progress, **kwargs)
-    back_kw = {**kwargs, "snapshot_every": 0}
-    bw = localize_log(grid, reverse_log(log), rng=rng,
-                      progress=None if progress is None else _Offset(progress, n), **back_kw)
+    log, sign_check = check_log_odometry(log, s.odometry_sign, min_range=s.min_range)
+    s = replace(s, odometry_sign="trust")
+    fw = localize_log(grid, log, s, rng=rng, progress=progress, snapshot_every=snapshot_every)
+    bw = localize_log(grid, reverse_log(log), s, rng=rng, progress=None if progress is None else _Offset(progress, n))
     t0 = time.perf_counter()
     if fit_distance is None:
-        sigma = (kwargs.get("sensor_params") or {}).get("sigma_hit", 0.3)
-        fit_distance = 2.0 * float(sigma)
-    mr = kwargs.get("max_range", 30.0)
-    fit = scan_fit_function(grid, log, fit_distance, min_range=float(kwargs.get("min_range", 0.0) or 0.0),
-                            max_range=None if mr is None else float(mr))
-    s = combine(fw.trace, reverse_trace(bw.trace), fit, odometry=log.odometry, agree_distance=agree_distance,
-                agree_heading=agree_heading)
-    tr = smoothed_trace(s)
-    res = SmoothResult(times=fw.times, trace=tr, odometry_check=sign_check, smooth=s,
-                       columns={"passes": s.passes, "source": s.source}, forward=fw, backward=bw,
-                       seconds_combine=time.perf_counter() - t0)
-    return res
+        fit_distance = 2.0 * s.sigma_hit
+    fit = scan_fit_function(grid, log, fit_distance, min_range=float(s.min_range or 0.0), max_range=s.max_range)
+    sm = combine(fw.trace, reverse_trace(bw.trace), fit, odometry=log.odometry, agree_distance=agree_distance,
+                 agree_heading=agree_heading)
+    return SmoothResult(times=fw.times, trace=smoothed_trace(sm), odometry_check=sign_check, smooth=sm,
+                        columns={"passes": sm.passes, "source": sm.source}, forward=fw, backward=bw,
+                        seconds_combine=time.perf_counter() - t0)
 
 
 def headline(summary: dict) -> str:

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from localize import cli, io, maps, sim
+from localize import cli, io, maps, pipeline, settings, sim
 from localize.geometry import angle_diff
+from localize.motion import ReversibleOdometry
 
 
 @pytest.fixture(scope="module")
@@ -196,26 +197,26 @@ def test_python_dash_m_entry_point(tmp_path):
 
 
 def test_converged_at():
-    assert cli.converged_at([1.0, 0.1, 0.1, 0.1], hold=2) == 1
-    assert cli.converged_at([0.1, 1.0, 0.1], hold=2) == 2  # the end of the log counts
-    assert cli.converged_at([1.0, 1.0]) is None
+    assert pipeline.converged_at([1.0, 0.1, 0.1, 0.1], hold=2) == 1
+    assert pipeline.converged_at([0.1, 1.0, 0.1], hold=2) == 2  # the end of the log counts
+    assert pipeline.converged_at([1.0, 1.0]) is None
     with pytest.raises(ValueError, match="hold"):
-        cli.converged_at([0.1], hold=0)
+        pipeline.converged_at([0.1], hold=0)
 
 
 def test_localize_log_validates(sim_files):
     map_path, log_path, _ = sim_files
     grid, log = io.read_map(map_path), io.read_log(log_path)
     with pytest.raises(TypeError, match="rng"):
-        cli.localize_log(grid, log, rng=None)
+        pipeline.localize_log(grid, log, rng=None)
     with pytest.raises(ValueError, match="init"):
-        cli.localize_log(grid, log, rng=np.random.default_rng(0), init="somewhere")
+        pipeline.localize_log(grid, log, rng=np.random.default_rng(0), init="somewhere")
     with pytest.raises(ValueError, match="reference poses"):
-        cli.localize_log(grid, log, rng=np.random.default_rng(0), init="reference")
+        pipeline.localize_log(grid, log, rng=np.random.default_rng(0), init="reference")
     with pytest.raises(ValueError, match="sensor must be"):
-        cli.make_sensor("sonar", grid, 10.0, np.zeros(3))
+        pipeline.make_sensor("sonar", grid, 10.0, np.zeros(3))
     with pytest.raises(ValueError, match="alphas"):
-        cli.ReversibleOdometry((0.1, 0.1))
+        ReversibleOdometry((0.1, 0.1))
 
 
 def test_beam_sensor_runs(sim_files, tmp_path):
@@ -232,12 +233,12 @@ def test_reversible_odometry_matches_plain_model_going_forward():
 
     u = ([0.0, 0.0, 0.1], [0.5, 0.1, 0.3])
     p = np.zeros((1000, 3))
-    a = cli.ReversibleOdometry((0.05, 0.01, 0.02, 0.05))(p, u, rng_a)
+    a = ReversibleOdometry((0.05, 0.01, 0.02, 0.05))(p, u, rng_a)
     b = sample_odometry(p, u, (0.05, 0.01, 0.02, 0.05), rng_b, min_trans=1e-3)
     assert np.array_equal(a, b)
     # backwards: mean displacement is the odometry's (within 5 standard errors), headings as reported
     back = ([0.0, 0.0, 0.0], [-0.3, 0.0, 0.2])
-    q = cli.ReversibleOdometry((0.05, 0.01, 0.02, 0.05))(np.zeros((20000, 3)), back, np.random.default_rng(1))
+    q = ReversibleOdometry((0.05, 0.01, 0.02, 0.05))(np.zeros((20000, 3)), back, np.random.default_rng(1))
     se = q[:, 0].std() / np.sqrt(len(q))
     assert abs(q[:, 0].mean() + 0.3) < 5 * se + 1e-3 and abs(np.median(q[:, 2]) - 0.2) < 0.01
 
@@ -267,7 +268,7 @@ def test_map_summary_counts_unknown_cells_apart():
     g = maps.office(0.1)
     data = np.array(g.data)
     data[:10, :] = np.nan                                    # 10 rows of unknown cells
-    summary = cli.map_summary(localize_grid(data, g.resolution))
+    summary = pipeline.map_summary(localize_grid(data, g.resolution))
     assert "2000 unknown" in summary and f"{int(np.sum(data > 0.5))} occupied" in summary
 
 
@@ -302,7 +303,7 @@ def _err(res, run):
 
 def test_state_localizes_on_a_good_run(rooms_run):
     grid, run = rooms_run
-    res = cli.localize_log(grid, _as_log(run), rng=np.random.default_rng(0), **STATE_KW)
+    res = pipeline.localize_log(grid, _as_log(run), rng=np.random.default_rng(0), **STATE_KW)
     e = _err(res, run)
     k = res.trace.first_localized()
     assert k is not None and res.state[-1] == "localized"
@@ -315,7 +316,7 @@ def test_state_localizes_on_a_good_run(rooms_run):
 def test_dead_laser_is_reported_not_localized(rooms_run, dead, tmp_path):
     grid, run = rooms_run
     log = _as_log(run, ranges=np.full_like(run.ranges, dead))
-    res = cli.localize_log(grid, log, rng=np.random.default_rng(0), **STATE_KW)
+    res = pipeline.localize_log(grid, log, rng=np.random.default_rng(0), **STATE_KW)
     assert res.trace.first_localized() is None and np.all(res.state == "searching")
     assert np.all(res.trace.n_valid == 0)
     summary = cli.summarize(res, log, 3000, log.poses, {})
@@ -329,7 +330,7 @@ def test_corrupt_odometry_record_is_rejected_and_reported(rooms_run):
     grid, run = rooms_run
     odo = np.array(run.odometry)
     odo[70] = [1e15, 1e15, 0.3]                        # one corrupt record (the 1e15)
-    res = cli.localize_log(grid, _as_log(run, odometry=odo), rng=np.random.default_rng(0), **STATE_KW)
+    res = pipeline.localize_log(grid, _as_log(run, odometry=odo), rng=np.random.default_rng(0), **STATE_KW)
     ev = [k for k, text in res.trace.events if "odometry" in text and "impossible" in text]
     assert ev == [70, 71]                              # into and out of the bad record
     assert np.all(np.abs(res.estimates) < 100)         # never thrown to 1e13 m
@@ -341,7 +342,7 @@ def test_kidnapping_turns_the_state_lost(rooms_run):
     grid, _ = rooms_run
     run = sim.range_run(grid, np.random.default_rng(2), n_steps=150, dt=0.5, speed=0.4, max_range=12.0,
                         n_clutter=3, kidnap_at=[90])
-    res = cli.localize_log(grid, _as_log(run), rng=np.random.default_rng(0), **STATE_KW)
+    res = pipeline.localize_log(grid, _as_log(run), rng=np.random.default_rng(0), **STATE_KW)
     assert res.state[89] == "localized"
     lost = [a for a, b in res.trace.lost_intervals() if a >= 90]
     assert lost and lost[0] <= 100                     # noticed within ten scans
@@ -362,7 +363,7 @@ def test_never_converging_robot_stays_searching():
     run = sim.range_run(g, np.random.default_rng(0), n_steps=120, dt=0.5, speed=0.4, max_range=12.0, n_clutter=0,
                         waypoints=[[22.0, 1.5], [38.0, 1.5]], start=[22.0, 1.5, 0.0])
     for seed in range(3):
-        res = cli.localize_log(g, _as_log(run), rng=np.random.default_rng(seed), **STATE_KW)
+        res = pipeline.localize_log(g, _as_log(run), rng=np.random.default_rng(seed), **STATE_KW)
         assert res.trace.first_localized() is None, seed
         assert cli.headline(cli.summarize(res, _as_log(run), 3000, None, {})).startswith("NOT localized")
 
@@ -386,20 +387,20 @@ def test_particles_auto_is_one_per_kld_bin_of_the_free_space_within_bounds():
     office = maps.office()
     area = office.free.sum() * office.resolution ** 2
     assert pose_bins(office) == round(area / (0.5 * 0.5) * 36)          # 36 heading bins of 10 degrees
-    assert cli.auto_particles(office) == pose_bins(office)
-    lo, hi = cli.AUTO_PARTICLES
+    assert pipeline.auto_particles(office) == pose_bins(office)
+    lo, hi = pipeline.AUTO_PARTICLES
     small = OccupancyGrid(np.zeros((40, 40)), 0.1)                      # 16 m^2: below the lower bound
     big = OccupancyGrid(np.zeros((1000, 1000)), 0.1)                    # 10,000 m^2: above the upper bound
-    assert (cli.auto_particles(small), cli.auto_particles(big)) == (lo, hi)
-    # the CLI's default is "auto"; run_kwargs resolves it with the map, and says so without one
+    assert (pipeline.auto_particles(small), pipeline.auto_particles(big)) == (lo, hi)
+    # the CLI's default is "auto"; the pipeline resolves it with the map, and says so without one
     args = cli.build_parser().parse_args(["run", "--log", "x.log", "--map", "m.yaml"])
     assert args.particles == "auto"
-    kw = cli.run_kwargs(args, grid=office)
-    assert kw["n_particles"] == kw["kld"].n_max == pose_bins(office)
+    s = cli.run_kwargs(args, grid=office)["settings"]
+    assert s.particles == pipeline.kld_sampling(s, s.particles).n_max == pose_bins(office)
     with pytest.raises(ValueError, match="sizes the cloud from the map: pass grid"):
-        cli.run_kwargs(args)
-    assert cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "x", "--map", "m", "--particles", "700"])
-                          )["n_particles"] == 700
+        pipeline.resolve_particles(settings.from_namespace(args).particles, None)
+    assert settings.from_namespace(cli.build_parser().parse_args(["run", "--log", "x", "--map", "m", "--particles",
+                                                                  "700"])).particles == 700
 
 
 @pytest.mark.parametrize("value", ["0", "lots", "-5", "2.5"])

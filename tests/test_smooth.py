@@ -10,11 +10,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from localize import cli, sim, smooth
-from localize.geometry import relative
+from localize import cli, pipeline, settings, sim, smooth
+from localize.geometry import relative, wrap_angle
 from localize.io import LaserLog
 from localize.maps import office
-from localize.mcl import ReversibleOdometry, RunTrace, run_filter
+from localize.mcl import ReversibleOdometry
+from localize.runloop import RunTrace, run_filter
 
 
 # ------------------------------------------------------------------ helpers
@@ -40,7 +41,11 @@ def _office_log(seed: int, n: int = 40) -> tuple[LaserLog, np.ndarray]:
 
 
 def _cli_kwargs(*options: str, grid=None) -> dict:
-    return cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-", *options]), grid=grid)
+    """``{"settings": RunSettings}`` of ``localize run`` with ``options`` (``--particles auto`` sized on ``grid``)."""
+    s = settings.from_namespace(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-", *options]))
+    if grid is not None:
+        s = replace(s, particles=pipeline.resolve_particles(s.particles, grid))
+    return {"settings": s}
 
 
 def _err(est, truth):
@@ -284,7 +289,7 @@ def test_bad_input_is_reported():
     tr = _trace(p, ["localized"] * 5)
     with pytest.raises(ValueError, match="different logs: forward has 5 scans, backward 4"):
         smooth.combine(tr, _trace(p[:4], ["localized"] * 4))
-    with pytest.raises(TypeError, match="backward must be a localize.mcl.RunTrace"):
+    with pytest.raises(TypeError, match="backward must be a localize.runloop.RunTrace"):
         smooth.combine(tr, "not a trace")
     with pytest.raises(ValueError, match="agree_distance"):
         smooth.combine(tr, tr, agree_distance=0.0)
@@ -311,7 +316,7 @@ def test_cli_smooth_on_a_one_scan_log_is_an_error_not_a_traceback(tmp_path):
 
 
 def test_run_filter_is_the_driver_of_both_passes(monkeypatch):
-    """No second filtering loop: both passes go through localize.mcl.run_filter."""
+    """No second filtering loop: both passes go through localize.runloop.run_filter."""
     calls = []
     import localize.mcl as mcl
 
@@ -391,3 +396,29 @@ def test_real_log_smoothed_from_the_first_scan(shared_data):
     loc = res.state == "localized"
     e = _err(res.estimates, log.poses)
     assert loc.mean() > np.mean(fw.state == "localized") and np.all(e[loc] < 1.0)
+
+
+def test_agreeing_headings_are_the_weighted_circular_mean_bit_for_bit():
+    """Where both passes agree, the heading is geometry.circular_mean of the two, weighted by the inverse squared
+    spreads: bit for bit the weighted angle mean combine wrote out before (across the +-pi seam too), and not the
+    unweighted mean (which a dropped weight would give)."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(3)
+    n = 2000
+    th_f = wrap_angle(np.pi + rng.normal(0.0, 0.2, n))                       # around the seam
+    th_b = wrap_angle(th_f + rng.normal(0.0, 0.1, n))
+    sp_f, sp_b = rng.uniform(0.001, 0.5, n), rng.uniform(0.001, 0.5, n)
+    sp_f[::50] = np.nan                                                     # a spread the run could not measure
+    poses_f = np.c_[rng.normal(size=(n, 2)), th_f]
+    poses_b = np.c_[poses_f[:, :2] + rng.normal(0.0, 0.1, (n, 2)), th_b]
+    stds = np.full((n, 3), 0.1)
+    fw = SimpleNamespace(poses=poses_f, stds=stds, spread=sp_f)
+    bw = SimpleNamespace(poses=poses_b, stds=stds, spread=sp_b)
+    got = smooth._estimates(fw, bw, np.zeros(n, dtype=bool), np.ones(n, dtype=bool))[0][:, 2]
+    wf = 1.0 / np.maximum(np.nan_to_num(sp_f, nan=1.0), 0.01) ** 2
+    wb = 1.0 / np.maximum(np.nan_to_num(sp_b, nan=1.0), 0.01) ** 2
+    old = wrap_angle(np.arctan2(wf * np.sin(th_f) + wb * np.sin(th_b), wf * np.cos(th_f) + wb * np.cos(th_b)))
+    assert np.array_equal(got, old)
+    unweighted = wrap_angle(np.arctan2(np.sin(th_f) + np.sin(th_b), np.cos(th_f) + np.cos(th_b)))
+    assert np.mean(np.abs(wrap_angle(got - unweighted)) > 1e-3) > 0.5

@@ -42,7 +42,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import localize
-from localize import cli, io, mapping, maps, sim
+from localize import cli, io, mapping, maps, pipeline, settings, sim
 from localize.geometry import compose
 from localize.plot import draw_map, draw_robot, draw_scan
 from localize.sensors import LikelihoodField
@@ -370,9 +370,9 @@ intel_file = data / "carmen" / "intel-corrected.log.gz"
 if intel_file.exists():
     intel = io.read_log(intel_file)
     intel_map = mapping.map_from_log(intel, resolution=0.05)
-    res = cli.localize_log(intel_map, intel, n_particles=500, rng=np.random.default_rng(0), init="reference",
-                           beams=60, alphas=(0.02, 0.005, 0.01, 0.02), temper=1.0, min_motion=(0.0, 0.0),
-                           sensor_params={"sigma_hit": 0.15})
+    res = pipeline.localize_log(intel_map, intel, n_particles=500, rng=np.random.default_rng(0), init="reference",
+                                beams=60, alphas=(0.02, 0.005, 0.01, 0.02), temper=1.0, min_motion=(0.0, 0.0),
+                                sensor_params={"sigma_hit": 0.15})
     e = np.hypot(*(res.estimates[:, :2] - intel.poses[:, :2]).T)
     fig, ax = plt.subplots(figsize=(7, 6.5))
     draw_map(intel_map, ax=ax)
@@ -512,7 +512,7 @@ plt.show()
 #
 # Real maps are drawn with walls 0.1–0.15 m too thick, doors open or shut,
 # furniture moved and parts left unknown. The command line's defaults
-# (`localize.cli.DEFAULTS`, each explained in `localize run --help`) follow from
+# (`localize.settings.RunSettings`, each explained in `localize run --help`) follow from
 # that physics, not from one data set:
 #
 # * **`--particles auto --kld 0.05 --min-particles 2000`** — a dense initial
@@ -765,11 +765,11 @@ if section:
 # %% tags=["remove-cell"]
 from localize.grid import OccupancyGrid  # noqa: E402
 
-assert abs(cli.auto_particles(OccupancyGrid(np.zeros((400, 130)), 0.1)) - 75_000) < 500   # 520 m^2 of free floor
-d = cli.DEFAULTS                                                     # the defaults the text names
+assert abs(pipeline.auto_particles(OccupancyGrid(np.zeros((400, 130)), 0.1)) - 75_000) < 500   # 520 m^2 of free floor
+d = settings.DEFAULTS                                                # the defaults the text names
 assert (d["sigma_hit"], d["temper"], d["z_short"], d["beams"], d["min_range"]) == (0.2, 0.3, 0.2, 30, 0.05), d
 assert (d["odometry_sign"], d["occupied_penalty"], d["restart_after"]) == ("auto", 5.0, 5), d
-assert d["short_beams"] == 1.0 and d["unknown_beams"] == "skip", d
+assert d["skip_short_beams"] == 1.0 and d["unknown_beams"] == "skip", d
 
 # %% [markdown]
 # A benchmark on which the defaults were chosen flatters them: each default
@@ -946,7 +946,7 @@ for line in warn_err.getvalue().splitlines():
 # %%
 t_tum, est_tum = io.read_tum(folder / "out_amcl" / "trajectory.tum")
 ape = np.hypot(*(est_tum[:, :2] - run.poses[:, :2]).T)
-k0 = cli.converged_at(ape, 0.5)
+k0 = pipeline.converged_at(ape, 0.5)
 print("scans:", len(t_tum), "| first time stamp:", round(float(t_tum[0]), 1), "s")
 print("within 0.5 m of the truth from scan", k0, f"| median APE afterwards {np.median(ape[k0:]):.1f} m")
 
@@ -1217,10 +1217,10 @@ if section:
 # tries the traps (units, beam order, "no return", line numbers).
 #
 # **3 (experiment).** On the simulated log of this chapter, run global
-# localization (`cli.localize_log`, seeds 0 to 7) with `temper=1` and with the
+# localization (`pipeline.localize_log`, seeds 0 to 7) with `temper=1` and with the
 # default `temper=0.3`, first with 1,000 particles, then with the default
 # number (`n_particles="auto"`). In how many seeds does it converge (within
-# 0.5 m: `cli.converged_at`)? What decides here, the tempering or the number of
+# 0.5 m: `pipeline.converged_at`)? What decides here, the tempering or the number of
 # particles? Then explain what tempering changes, and why it matters on real
 # logs whose maps disagree with their scans.
 
@@ -1281,11 +1281,11 @@ for particles in (1000, "auto"):
     for temper in (1.0, 0.3):
         steps = []
         for seed in range(8):
-            res = cli.localize_log(grid, log, n_particles=particles, rng=np.random.default_rng(seed), temper=temper)
-            steps.append(cli.converged_at(np.hypot(*(res.estimates[:, :2] - run.poses[:, :2]).T), 0.5))
+            res = pipeline.localize_log(grid, log, n_particles=particles, rng=np.random.default_rng(seed), temper=temper)
+            steps.append(pipeline.converged_at(np.hypot(*(res.estimates[:, :2] - run.poses[:, :2]).T), 0.5))
         converged[particles, temper] = sum(s is not None for s in steps)
         print(f"{particles!s:>5} particles, temper {temper:3}: converged in {converged[particles, temper]} of 8 seeds")
-print("'auto' is", cli.resolve_particles("auto", grid), "particles on this map")
+print("'auto' is", pipeline.resolve_particles("auto", grid), "particles on this map")
 assert all(2 <= converged[1000, t] <= 6 for t in (1.0, 0.3))     # "about half the seeds", either way
 assert converged["auto", 1.0] == converged["auto", 0.3] == 8
 

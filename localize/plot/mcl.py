@@ -1,8 +1,8 @@
 """Figures of Monte Carlo Localization: particle clouds, snapshot strips, animations, errors.
 
 Every function draws with matplotlib and returns what it made; none runs a
-filter. The data come from :func:`localize.mcl.run_mcl` (an
-:class:`~localize.mcl.RunTrace` with snapshots) and a simulated run.
+filter. The data come from :func:`localize.runloop.run_mcl` (an
+:class:`~localize.runloop.RunTrace` with snapshots) and a simulated run.
 """
 
 from __future__ import annotations
@@ -123,7 +123,7 @@ def snapshot_strip(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLike |
     Parameters
     ----------
     snapshots : dict
-        ``step -> (particles, weights)`` as in :attr:`localize.mcl.RunTrace.snapshots`.
+        ``step -> (particles, weights)`` as in :attr:`localize.runloop.RunTrace.snapshots`.
     true_poses, estimates : array_like (T, 3), optional
         Drawn at each snapshot's step.
     steps : sequence of int, optional

@@ -66,7 +66,7 @@ def simulate(
     Returns
     -------
     run : localize.sim.RangeRun
-    trace : localize.mcl.RunTrace
+    trace : localize.runloop.RunTrace
         With a snapshot ``(particles, weights)`` at every step.
 
     Examples

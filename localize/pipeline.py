@@ -1,0 +1,566 @@
+"""The log-level pipeline: read a log and a map, build the sensor model and the filter, run it, collect the result.
+
+What ``localize run`` does between parsing its options and writing its files,
+as a library that the command line (:mod:`localize.cli`), the offline
+smoother (:mod:`localize.smooth`), the benchmarks and chapter 9 import:
+
+* :func:`read_log_file`, :func:`read_map_file`, :func:`read_inputs` -- the
+  files, formats detected from their content (:mod:`localize.io`), a map built
+  from a corrected log's poses (:func:`localize.mapping.map_from_log`);
+* :func:`localize_log` -- one run of the run driver
+  :func:`localize.runloop.run_filter` over a log, with the settings of a
+  :class:`~localize.settings.RunSettings`; it returns a :class:`RunResult`;
+* :func:`make_sensor`, :func:`kld_sampling`, :func:`augmented_filter`,
+  :func:`auto_particles` -- the pieces it builds from the settings;
+* :func:`check_log_odometry` -- the scans' check of the odometry's sign;
+* :func:`converged_at` -- when a trajectory's error (or spread) settles.
+
+Examples
+--------
+>>> from localize import sim
+>>> from localize.io import LaserLog
+>>> from localize.maps import office
+>>> from localize.settings import RunSettings
+>>> g = office(0.1)
+>>> run = sim.range_run(g, np.random.default_rng(1), n_steps=12, dt=0.5, speed=0.4, max_range=10.0)
+>>> log = LaserLog(times=run.times, odometry=run.poses, ranges=run.ranges, angles=run.angles,
+...                max_range=run.max_range, poses=run.poses)
+>>> s = RunSettings(particles=500, track=True, kld=0, min_motion=(0, 0))
+>>> res = localize_log(g, log, s, rng=np.random.default_rng(0))
+>>> res.estimates.shape, bool(np.hypot(*(res.estimates[-1, :2] - run.poses[-1, :2])) < 0.5)
+((12, 3), True)
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._checks import check_count, check_rng
+from .grid import OccupancyGrid
+from .motion import ReversibleOdometry
+from .settings import DEFAULTS, LEGACY_NAMES, RunSettings
+
+__all__ = ["RunResult", "localize_log", "make_sensor", "check_log_odometry", "auto_particles", "resolve_particles",
+           "converged_at", "kld_sampling", "augmented_filter", "settings_with", "read_log_file", "read_map_file",
+           "read_inputs", "Inputs", "check_free_space", "map_summary", "AUTO_PARTICLES", "ODOMETRY_SIGN"]
+
+
+# ============================================================================ particles
+#: ``--particles auto``: one particle per KLD bin of the map's free space, within these bounds.
+AUTO_PARTICLES: tuple[int, int] = (20_000, 300_000)
+
+
+def auto_particles(grid: OccupancyGrid) -> int:
+    """The initial cloud of ``localize run --particles auto`` (the default) for a map.
+
+    One particle per 0.5 m x 0.5 m x 10 degree bin of the free space
+    (:func:`localize.kld.pose_bins`, KLD-sampling's bins), so that a uniform
+    cloud leaves few bins near the robot empty whatever the building's size;
+    at least 20,000 and at most 300,000 (:data:`AUTO_PARTICLES`). About
+    75,000 for a floor of 520 m^2 of free space, 115,000 for 800 m^2.
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> auto_particles(office())                 # the book's office: 204 m^2 of free space
+    29412
+    """
+    from .kld import pose_bins
+
+    lo, hi = AUTO_PARTICLES
+    return int(min(max(pose_bins(grid), lo), hi))
+
+
+def resolve_particles(n: int | str, grid: OccupancyGrid | None) -> int:
+    """``n`` particles, or :func:`auto_particles` of ``grid`` for ``"auto"``.
+
+    >>> resolve_particles(700, None), resolve_particles("auto", OccupancyGrid(np.zeros((10, 10)), 0.1))
+    (700, 20000)
+    """
+    if isinstance(n, str):
+        if n != "auto":
+            raise ValueError(f"n_particles must be a whole number >= 1 or 'auto'; got {n!r}")
+        if grid is None:
+            raise ValueError("n_particles='auto' sizes the cloud from the map: pass grid=... (or a number)")
+        return auto_particles(grid)
+    return check_count(n, "n_particles")
+
+
+# ============================================================================ settings -> objects
+def settings_with(settings: RunSettings | None = None, **changes: Any) -> RunSettings:
+    """``settings`` (default :class:`~localize.settings.RunSettings`) with ``changes``, old names accepted.
+
+    Besides the settings' own names, the keywords :func:`localize_log` had
+    before the settings had a home are read: ``n_particles``, ``short_beams``,
+    ``recovery``; ``init`` ("global" / "reference", the setting ``track``);
+    ``kld`` as a :class:`~localize.kld.KLDSampling`, ``"default"`` or None (off);
+    ``augmented`` as an :class:`~localize.mcl.Augmented`, a pair or None (off);
+    ``sensor_params`` with a ``sigma_hit`` (the setting ``sigma_hit``).
+
+    Examples
+    --------
+    >>> s = settings_with(n_particles=500, init="reference", kld=None, sensor_params={"sigma_hit": 0.15})
+    >>> s.particles, s.track, s.kld, s.sigma_hit, s.sensor_params
+    (500, True, 0.0, 0.15, {})
+    """
+    ch: dict[str, Any] = {LEGACY_NAMES.get(k, k): v for k, v in changes.items()}
+    if "init" in ch:
+        init = ch.pop("init")
+        if init not in ("global", "reference"):
+            raise ValueError(f"init must be 'global' or 'reference'; got {init!r}")
+        ch["track"] = init == "reference"
+    if "kld" in ch and not isinstance(ch["kld"], (int, float)):
+        k = ch.pop("kld")
+        if k is None:
+            ch["kld"] = 0.0
+        elif isinstance(k, str):
+            if k != "default":
+                raise ValueError(f"kld must be a localize.kld.KLDSampling, 'default' or None; got {k!r}")
+        else:
+            ch.update(kld=k.epsilon, kld_delta=k.delta, min_particles=k.n_min, kld_max_particles=k.n_max,
+                      kld_chunked=k.chunked)
+    if "augmented" in ch:
+        a = ch.pop("augmented")
+        if a is None:
+            ch["augmented"] = (0.0, 0.0)
+        elif isinstance(a, (tuple, list)):
+            ch.update(augmented=tuple(a[:2]), augmented_temperature=float(a[2]) if len(a) > 2 else 1.0)
+        else:
+            ch.update(augmented=(a.alpha_slow, a.alpha_fast), augmented_temperature=a.temperature)
+    if "sensor_params" in ch:
+        params = dict(ch["sensor_params"] or {})
+        if "sigma_hit" in params:
+            ch["sigma_hit"] = params.pop("sigma_hit")
+        ch["sensor_params"] = params
+    return replace(settings if settings is not None else RunSettings(), **ch)
+
+
+def kld_sampling(settings: RunSettings, n_particles: int):
+    """The :class:`~localize.kld.KLDSampling` of ``settings`` for a run of ``n_particles``, or None (``kld`` 0).
+
+    >>> k = kld_sampling(RunSettings(), 30000)
+    >>> k.epsilon, k.n_min, k.n_max, k.chunked
+    (0.05, 2000, 30000, True)
+    """
+    if not settings.kld > 0:
+        return None
+    from .kld import KLDSampling
+
+    n_max = int(n_particles) if settings.kld_max_particles is None else settings.kld_max_particles
+    return KLDSampling(epsilon=settings.kld, delta=settings.kld_delta, n_min=min(settings.min_particles, n_max),
+                       n_max=n_max, chunked=settings.kld_chunked)
+
+
+def augmented_filter(settings: RunSettings):
+    """The :class:`~localize.mcl.Augmented` of ``settings``, or None (rates 0 0).
+
+    >>> augmented_filter(RunSettings(augmented=(0.01, 0.2)))
+    Augmented(alpha_slow=0.01, alpha_fast=0.2, temperature=30.0)
+    """
+    slow, fast = settings.augmented
+    if not (slow > 0 or fast > 0):
+        return None
+    from .mcl import Augmented
+
+    temperature = settings.augmented_temperature
+    if temperature is None:
+        temperature = float(settings.beams) if settings.beams is not None else 1.0
+    try:
+        return Augmented(alpha_slow=slow, alpha_fast=fast, temperature=temperature)
+    except ValueError as e:
+        raise ValueError(f"--augmented {slow:g} {fast:g}: {e}") from None
+
+
+def make_sensor(kind: str, grid: OccupancyGrid, max_range: float, sensor_offset: NDArray, **params: Any):
+    """Build the range sensor model named ``kind`` ("likelihood" or "beam") for a log run.
+
+    Defaults are chosen for real data: maps are 10-15 cm off (walls drawn
+    thicker than the laser sees them, furniture moved), so ``sigma_hit`` is a
+    generous 0.3 m and a random-reading component is always present. Keyword
+    arguments override them (``sigma_hit``, ``temper``, ``z_hit`` ...).
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> make_sensor("likelihood", office(), 8.0, np.zeros(3), sigma_hit=0.2)
+    LikelihoodField(max_range=8, z_hit=0.9, z_rand=0.1, sigma_hit=0.2, max_dist=0.8)
+    """
+    from . import sensors
+
+    if kind == "likelihood":
+        kw: dict[str, Any] = dict(z_hit=0.9, z_rand=0.1, sigma_hit=0.3, unknown_is_obstacle=False,
+                                  unknown_neutral=True)
+        kw.update(params)
+        return sensors.LikelihoodField(grid, max_range, sensor_offset=tuple(sensor_offset), **kw)
+    if kind == "beam":
+        # ray casting by the compact lookup table (under 90 MB, about a second to build for an
+        # 800 x 800 map; see localize.raycast); method="march" needs no table but is ~30x slower
+        kw = dict(z_hit=0.75, z_short=0.05, z_max=0.05, z_rand=0.15, sigma_hit=0.3, lambda_short=0.5,
+                  method="compact")
+        kw.update(params)
+        return sensors.BeamModel(grid, max_range, sensor_offset=tuple(sensor_offset), **kw)
+    raise ValueError(f"sensor must be 'likelihood' or 'beam'; got {kind!r}")
+
+
+# ============================================================================ the result
+@dataclass
+class RunResult:
+    """What :func:`localize_log` returns: the run driver's record of every scan, with the scans' times.
+
+    ``trace`` is :func:`localize.runloop.run_filter`'s :class:`~localize.runloop.RunTrace` (the one trace type);
+    the other attributes are read from it: ``estimates`` (its ``poses``), ``spread`` (the position spread
+    of *all* particles, ``hypot(std_x, std_y)``), ``n_eff``, ``updated``, ``seconds``, ``snapshots``,
+    ``state`` (``searching``, ``localized`` or ``lost``, see :class:`localize.policies.StateRules`) and
+    ``covariances`` (``(K, 3, 3)``, the particles' variances on the diagonal, for the result bag).
+    """
+
+    times: NDArray[np.float64]
+    trace: Any
+    odometry_check: Any = None
+
+    @property
+    def estimates(self) -> NDArray[np.float64]:
+        return self.trace.poses
+
+    @property
+    def spread(self) -> NDArray[np.float64]:
+        return np.hypot(self.trace.stds[:, 0], self.trace.stds[:, 1])
+
+    @property
+    def covariances(self) -> NDArray[np.float64]:
+        covs = np.zeros((len(self.trace), 3, 3))
+        covs[:, [0, 1, 2], [0, 1, 2]] = self.trace.stds ** 2
+        return covs
+
+    def __getattr__(self, name: str) -> Any:
+        if name in ("n_eff", "updated", "seconds", "snapshots", "state"):
+            return getattr(self.trace, name)
+        raise AttributeError(f"RunResult has no attribute {name!r}")
+
+    @property
+    def seconds_per_scan(self) -> float:
+        return self.seconds / max(len(self.times), 1)
+
+
+# ============================================================================ odometry
+#: ``--odometry-sign``: when the scans may reverse odometry steps (see :func:`check_log_odometry`).
+ODOMETRY_SIGN = ("auto", "check", "trust")
+
+
+def check_log_odometry(log, mode: str = DEFAULTS["odometry_sign"], min_range: float = DEFAULTS["min_range"]):
+    """``(log, check)``: the log with the odometry steps the scans say were driven backwards reversed.
+
+    ``mode`` "check" compares every step of the odometry with consecutive scans
+    (:func:`localize.scanmatch.check_odometry_sign`); "auto" (the default of
+    ``localize run``) does so only for odometry that never reports reversing
+    (:func:`localize.scanmatch.reports_reversing`): a speed without a sign,
+    whose backing-up manoeuvres read as driving forwards; "trust" never.
+    ``check`` is the :class:`~localize.scanmatch.OdometrySignCheck`, or None
+    when nothing was checked. A log whose steps all keep their sign is
+    returned as it is.
+
+    Examples
+    --------
+    >>> from localize.io import LaserLog
+    >>> wall = np.c_[np.full(41, 2.0), np.linspace(-1, 1, 41)]            # a wall 2 m ahead
+    >>> angles = np.arctan2(wall[:, 1], wall[:, 0])
+    >>> log = LaserLog(times=[0.0, 1.0], odometry=[[0, 0, 0], [0.4, 0, 0]], angles=angles, max_range=30.0,
+    ...                ranges=[np.hypot(*wall.T), np.hypot(wall[:, 0] + 0.4, wall[:, 1])])   # backs up 0.4 m
+    >>> fixed, chk = check_log_odometry(log)
+    >>> chk.reversed.tolist(), fixed.odometry[-1].round(3).tolist()
+    ([0], [-0.4, 0.0, 0.0])
+    >>> check_log_odometry(log, "trust")[1] is None
+    True
+    """
+    from .scanmatch import check_odometry_sign, reports_reversing
+
+    if mode not in ODOMETRY_SIGN:
+        raise ValueError(f"odometry_sign must be one of {', '.join(ODOMETRY_SIGN)}; got {mode!r}")
+    if mode == "trust" or (mode == "auto" and reports_reversing(log.odometry)):
+        return log, None
+    chk = check_odometry_sign(log.ranges, log.angles, log.odometry, log.max_range, min_range=min_range or 0.0,
+                              sensor_offset=log.sensor_offset)
+    if chk.reversed.size:
+        log = replace(log, odometry=chk.odometry, meta={**log.meta, "odometry_reversed_by_scans": chk.summary()})
+    return log, chk
+
+
+# ============================================================================ the run
+def localize_log(grid: OccupancyGrid, log, settings: RunSettings | None = None, *, rng: np.random.Generator | None = None,
+                 progress: Any = None, snapshot_every: int = 0, snapshot_particles: int = 1000, rules: Any = None,
+                 **changes: Any) -> RunResult:
+    """Run MCL over a :class:`~localize.io.LaserLog` on ``grid`` with ``settings``; return the per-scan estimates.
+
+    The filtering loop is :func:`localize.runloop.run_filter`, the one run driver
+    (update gating, estimates, the searching / localized / lost state); this
+    function builds the filter from the settings (:class:`~localize.settings.RunSettings`,
+    default: those of ``localize run``), with ``changes`` to them by keyword
+    (:func:`settings_with`: ``beams=60``, ``init="reference"``, ...).
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+        The map.
+    log : LaserLog
+        Scans and odometry (the controls are consecutive odometry poses).
+    settings : RunSettings, optional
+        The run's settings (see ``localize run --help`` for each).
+    rng : numpy.random.Generator
+        The only source of randomness (required).
+    progress : object with ``update_to(done)``, optional
+        Told the number of scans done after each scan.
+    snapshot_every : int
+        Keep a subsample of ``snapshot_particles`` particles every so many scans (for animations); 0: never.
+    rules : localize.policies.StateRules, optional
+        Thresholds of the honest state.
+    **changes
+        Settings changed for this run (see :func:`settings_with`).
+
+    Returns
+    -------
+    RunResult
+    """
+    from .mcl import MCL, RobustOdometry
+    from .runloop import run_filter
+
+    check_rng(rng)
+    s = settings_with(settings, **changes)
+    n_particles = resolve_particles(s.particles, grid)
+    log, sign_check = check_log_odometry(log, s.odometry_sign, min_range=s.min_range)
+    if s.beams is not None and s.beams < log.n_beams:
+        log = log.select_beams(count=s.beams)
+    mr = log.max_range if s.max_range is None else min(float(s.max_range), log.max_range)
+    model = make_sensor(s.sensor, grid, mr, log.sensor_offset, temper=s.temper, **_sensor_params(s))
+    ranges = np.minimum(log.ranges, mr)
+    motion: Any = ReversibleOdometry(s.alphas, min_trans=s.min_trans)
+    if s.odometry_outliers:
+        motion = RobustOdometry(motion, outlier=s.odometry_outliers)
+    opts: dict[str, Any] = dict(resample_threshold=s.resample_threshold, injection=s.injection,
+                                free_space_only=s.free_space_only, augmented=augmented_filter(s),
+                                kld=kld_sampling(s, n_particles), unknown_allowed=s.unknown_allowed,
+                                unknown_penalty=s.unknown_penalty, min_ess=s.min_ess,
+                                occupied_penalty=s.occupied_penalty)
+    if not s.track:
+        f = MCL.uniform(grid, n_particles, motion, model, rng=rng, **opts)
+    else:
+        if log.poses is None:
+            raise ValueError("init='reference' (track) needs reference poses in the log (log.poses is None)")
+        f = MCL.gaussian(log.poses[0], tuple(s.init_std), n_particles, motion, model, rng=rng, grid=grid, **opts)
+    k_scans = len(log)
+    snap_steps: Sequence[int] = ()
+    if snapshot_every:
+        snap_steps = sorted(set(range(0, k_scans, snapshot_every)) | {k_scans - 1})
+    odo = log.odometry
+    angles = log.angles
+    tr = run_filter(f, k_scans, lambda k: (odo[k - 1], odo[k]), lambda k: (ranges[k], angles), grid=grid,
+                    min_motion=tuple(s.min_motion), rules=rules, snapshot_steps=snap_steps,
+                    snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=s.recovery_injection,
+                    restart_after=s.restart_after, expand=tuple(s.expand),
+                    skip_unknown_beams=s.unknown_beams == "skip", skip_short_beams=s.skip_short_beams,
+                    callback=None if progress is None else progress.update_to)
+    return RunResult(times=np.asarray(log.times), trace=tr, odometry_check=sign_check)
+
+
+def _sensor_params(s: RunSettings) -> dict[str, Any]:
+    """The sensor model's keyword arguments of ``s`` (``sensor_params`` win over the named settings)."""
+    params = dict(s.sensor_params)
+    params.setdefault("sigma_hit", s.sigma_hit)
+    if s.sensor == "likelihood":
+        if s.min_range:
+            params.setdefault("min_range", float(s.min_range))
+        params.setdefault("z_short", s.z_short)
+    return params
+
+
+# ============================================================================ files
+@dataclass(frozen=True)
+class Inputs:
+    """The files of a run and how to read them (``localize run``'s input options).
+
+    ``map`` is a map file, or None with ``build_map`` (the map built from the
+    log's reference poses at ``resolution``); ``scans`` selects scans of the log.
+    """
+
+    log: Path
+    map: Path | None = None
+    log_format: str | None = None
+    map_format: str | None = None
+    scan_topic: str | None = None
+    odom_topic: str | None = None
+    laser_pose: tuple[float, float, float] | None = None
+    build_map: bool = False
+    resolution: float = 0.05
+    not_free_is_occupied: bool = False
+    scans: slice | None = None
+
+    def __post_init__(self) -> None:
+        if self.map is None and not self.build_map:
+            raise ValueError("give --map FILE, or --build-map to build the map from the log's corrected poses")
+        if self.map is not None and self.build_map:
+            raise ValueError("give either --map or --build-map, not both")
+
+
+def _relaying_warnings(warn: Callable[[str], None] | None, read: Callable, *args: Any, **kwargs: Any) -> Any:
+    """``read(*args, **kwargs)``, each warning it gives passed to ``warn`` as text (or left to Python: None)."""
+    if warn is None:
+        return read(*args, **kwargs)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = read(*args, **kwargs)
+    for w in caught:
+        warn(str(w.message))
+    return out
+
+
+def read_log_file(path: Path, format: str | None = None, *, scan_topic: str | None = None,
+                  odom_topic: str | None = None, laser_pose: ArrayLike | None = None,
+                  min_range: float | None = None, warn: Callable[[str], None] | None = None):
+    """Read a log (CMU, CARMEN or a ROS bag, detected from the content) as a :class:`~localize.io.LaserLog`.
+
+    ``laser_pose`` overrides the log's sensor mounting pose; readings below
+    ``min_range`` become "no return" (the log's maximum range); the readers'
+    warnings (skipped records, time stamps) go to ``warn``.
+
+    Examples
+    --------
+    >>> read_log_file(Path("missing.log"))
+    Traceback (most recent call last):
+    ...
+    localize.io._common.FormatError: missing.log: no such file
+    """
+    from . import io as lio
+    from .io import rosbag
+
+    if format == "rosbag" or (format is None and rosbag.is_rosbag(path)):
+        log = rosbag.read_rosbag(path, scan_topic=scan_topic, odom_topic=odom_topic, laser_pose=laser_pose)
+        if log.skipped and warn is not None:
+            warn(f"{path}: skipped " + "; ".join(f"{n} {k}" for k, n in log.skipped.items()))
+    else:
+        if scan_topic or odom_topic:
+            raise ValueError("--scan-topic and --odom-topic apply to ROS bags only")
+        log = _relaying_warnings(warn, lio.read_log, path, format=format)
+        for msg in lio.time_stamp_problems(log):
+            if warn is not None:
+                warn(f"{msg}; the filter follows the record order")
+        if laser_pose is not None:
+            log = replace(log, sensor_offset=np.asarray(laser_pose, dtype=float),
+                          meta={**log.meta, "sensor_offset_source": "given (--laser-pose)"})
+    if min_range:
+        r = np.array(log.ranges, copy=True)
+        r[r < min_range] = log.max_range
+        log = replace(log, ranges=r, meta={**log.meta, "min_range": min_range})
+    return log
+
+
+def read_map_file(path: Path, format: str | None = None, *, not_free_is_occupied: bool = False,
+                  warn: Callable[[str], None] | None = None) -> OccupancyGrid:
+    """Read a map (CMU 16-831 or ROS map_server, detected from the content); its warnings go to ``warn``.
+
+    >>> from localize import io
+    >>> path = io.write_cmu_map(tmp_dir() / "m.dat", OccupancyGrid(np.zeros((4, 6)), 0.1))
+    >>> read_map_file(path).shape
+    (4, 6)
+    >>> read_map_file(path, not_free_is_occupied=True)
+    Traceback (most recent call last):
+    ...
+    ValueError: --not-free-is-occupied applies to ROS map_server maps only
+    """
+    from . import io as lio
+
+    kw = {"not_free": "occupied"} if not_free_is_occupied else {}
+    fmt = format or lio.detect_map_format(path)
+    if kw and fmt != "ros":
+        raise ValueError("--not-free-is-occupied applies to ROS map_server maps only")
+    return _relaying_warnings(warn, lio.read_map, path, format=fmt, **kw)
+
+
+def check_free_space(grid: OccupancyGrid, where: str) -> None:
+    """ValueError naming ``where`` if ``grid`` has no free cell to localize in.
+
+    >>> check_free_space(OccupancyGrid(np.ones((2, 2)), 0.1), "walls.dat")
+    Traceback (most recent call last):
+    ...
+    ValueError: walls.dat: the map has no free cell to localize in (4 occupied, 0 unknown of 4 cells); check the map's format and thresholds (ROS maps: --not-free-is-occupied only adds obstacles)
+    """
+    if not grid.free.any():
+        raise ValueError(f"{where}: the map has no free cell to localize in ({grid.occupied.sum()} occupied, "
+                         f"{grid.unknown.sum()} unknown of {grid.data.size} cells); check the map's format and "
+                         "thresholds (ROS maps: --not-free-is-occupied only adds obstacles)")
+
+
+def read_inputs(inputs: Inputs, min_range: float | None = None, warn: Callable[[str], None] | None = None):
+    """``(log, grid, map_description)``: the log (its ``scans``) and the map of a run, checked.
+
+    Examples
+    --------
+    >>> Inputs(log=Path("missing.log"), map=Path("m.dat"), build_map=True)
+    Traceback (most recent call last):
+    ...
+    ValueError: give either --map or --build-map, not both
+    """
+    from .mapping import map_from_log
+
+    log = read_log_file(inputs.log, inputs.log_format, scan_topic=inputs.scan_topic, odom_topic=inputs.odom_topic,
+                        laser_pose=inputs.laser_pose, min_range=min_range, warn=warn)
+    if inputs.scans is not None:
+        log = log.select(inputs.scans)
+    if inputs.build_map:
+        if log.poses is None:
+            raise ValueError(f"{inputs.log}: --build-map needs reference poses in the log (it has none); give --map")
+        grid = map_from_log(log, resolution=inputs.resolution)
+        desc = f"built from {inputs.log} (resolution {inputs.resolution:g} m)"
+    else:
+        grid = read_map_file(inputs.map, inputs.map_format, not_free_is_occupied=inputs.not_free_is_occupied,
+                             warn=warn)
+        desc = str(inputs.map)
+    check_free_space(grid, desc)
+    return log, grid, desc
+
+
+def map_summary(grid: OccupancyGrid) -> str:
+    """One line on a map: size, and free, occupied and *unknown* cells counted apart.
+
+    (The grid's repr counts unknown cells among the obstacles, as a range
+    sensor sees them; a map summary should not.)
+
+    Examples
+    --------
+    >>> g = OccupancyGrid(np.array([[0.0, 1.0], [np.nan, 0.0]]), 0.5)
+    >>> map_summary(g)
+    '2 x 2 cells of 0.5 m (1 x 1 m): 2 free, 1 occupied, 1 unknown'
+    """
+    rows, cols = grid.shape
+    return (f"{cols} x {rows} cells of {grid.resolution:g} m ({grid.width_m:g} x {grid.height_m:g} m): "
+            f"{int(grid.free.sum())} free, {int(grid.occupied.sum())} occupied, {int(grid.unknown.sum())} unknown")
+
+
+# ============================================================================ results
+def converged_at(values: ArrayLike, threshold: float = 0.5, hold: int = 20) -> int | None:
+    """First scan from which ``values`` stay below ``threshold`` for ``hold`` scans in a row.
+
+    Fewer than ``hold`` scans left at the end of the log count if all of them
+    are below. Returns None if that never happens. (A stricter reading, "below
+    until the end of the log", is :func:`localize.metrics.convergence_step`.)
+
+    Examples
+    --------
+    >>> converged_at([3.0, 0.2, 0.9, 0.3, 0.2, 0.1, 0.2, 2.0], threshold=0.5, hold=3)
+    3
+    >>> converged_at([3.0, 2.0], hold=3) is None
+    True
+    """
+    v = np.asarray(values, dtype=float).reshape(-1)
+    hold = check_count(hold, "hold")
+    ok = v < float(threshold)
+    run = 0
+    for k in range(v.size - 1, -1, -1):  # run[k] = consecutive oks starting at k
+        run = run + 1 if ok[k] else 0
+        ok[k] = run >= hold or (run == v.size - k and run > 0)
+    idx = np.flatnonzero(ok)
+    return int(idx[0]) if idx.size else None

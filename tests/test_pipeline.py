@@ -1,0 +1,98 @@
+"""localize.pipeline: the log-level pipeline as a library, driven by a RunSettings."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from localize import cli, io, maps, pipeline, sim
+from localize.grid import OccupancyGrid
+from localize.kld import KLDSampling
+from localize.mcl import Augmented
+from localize.settings import RunSettings
+
+
+@pytest.fixture(scope="module")
+def office_run():
+    grid = maps.office(0.1)
+    run = sim.range_run(grid, np.random.default_rng(2), n_steps=16, dt=0.5, speed=0.4, max_range=10.0,
+                        angles=np.linspace(-np.pi / 2, np.pi / 2, 61))
+    log = io.LaserLog(times=run.times, odometry=run.odometry, ranges=run.ranges, angles=run.angles,
+                      max_range=run.max_range, poses=run.poses)
+    return grid, log
+
+
+def _same(a, b) -> bool:
+    return np.array_equal(a.estimates, b.estimates) and np.array_equal(a.state, b.state)
+
+
+def test_settings_and_the_old_keywords_run_the_same_filter_bit_for_bit(office_run):
+    grid, log = office_run
+    s = RunSettings(particles=1500, track=True, kld=0.0, min_motion=(0.0, 0.0), sigma_hit=0.15, beams=31,
+                    augmented=(0.01, 0.2), augmented_temperature=1.0, recovery_injection=0.05, skip_short_beams=0.5)
+    a = pipeline.localize_log(grid, log, s, rng=np.random.default_rng(3))
+    b = pipeline.localize_log(grid, log, rng=np.random.default_rng(3), n_particles=1500, init="reference", kld=None,
+                              min_motion=(0.0, 0.0), sensor_params={"sigma_hit": 0.15}, beams=31,
+                              augmented=Augmented(0.01, 0.2), recovery_injection=0.05, short_beams=0.5)
+    assert _same(a, b)
+    # ... and a setting that matters changes the run (the comparison can fail)
+    c = pipeline.localize_log(grid, log, dataclasses.replace(s, sigma_hit=0.4), rng=np.random.default_rng(3))
+    assert not np.array_equal(a.estimates, c.estimates)
+
+
+def test_the_library_defaults_are_the_command_lines(office_run):
+    grid, log = office_run
+    kw = cli.run_kwargs(cli.build_parser().parse_args(["run", "--log", "-", "--map", "-", "--particles", "2000"]))
+    a = pipeline.localize_log(grid, log, rng=np.random.default_rng(0), **kw)
+    b = pipeline.localize_log(grid, log, rng=np.random.default_rng(0), particles=2000)
+    assert _same(a, b)
+
+
+def test_kld_and_augmented_objects_become_settings_and_come_back():
+    k = KLDSampling(epsilon=0.03, delta=0.2, n_min=300, n_max=4000)
+    s = pipeline.settings_with(kld=k, particles=4000)
+    assert pipeline.kld_sampling(s, s.particles) == k
+    # the command line's: its bounds follow the particles, never below min_particles unless there are fewer
+    assert pipeline.kld_sampling(RunSettings(), 1000) == KLDSampling(epsilon=0.05, n_min=1000, n_max=1000,
+                                                                     chunked=True)
+    assert pipeline.kld_sampling(RunSettings(kld=0), 1000) is None
+    aug = Augmented(alpha_slow=0.002, alpha_fast=0.3, temperature=7.0)
+    assert pipeline.augmented_filter(pipeline.settings_with(augmented=aug)) == aug
+    assert pipeline.augmented_filter(RunSettings(beams=45, augmented=(0.01, 0.2))).temperature == 45.0
+    assert pipeline.augmented_filter(RunSettings()) is None
+    with pytest.raises(ValueError, match="init must be 'global' or 'reference'"):
+        pipeline.settings_with(init="somewhere")
+    with pytest.raises(ValueError, match="kld must be a localize.kld.KLDSampling, 'default' or None"):
+        pipeline.settings_with(kld="lots")
+
+
+def test_settings_passed_are_not_changed(office_run):
+    grid, log = office_run
+    s = RunSettings(particles="auto", kld=0.0, min_motion=(0.0, 0.0))
+    res = pipeline.localize_log(grid, log.select(slice(0, 3)), s, rng=np.random.default_rng(0))
+    assert s.particles == "auto" and len(res.times) == 3
+
+
+def test_inputs_are_checked_before_anything_is_read(tmp_path):
+    with pytest.raises(ValueError, match="give --map FILE, or --build-map"):
+        pipeline.Inputs(log=tmp_path / "a.log")
+    walls = io.write_cmu_map(tmp_path / "walls.dat", OccupancyGrid(np.ones((20, 30)), 0.1))
+    with pytest.raises(ValueError, match="the map has no free cell to localize in"):
+        pipeline.check_free_space(io.read_map(walls), str(walls))
+
+
+def test_read_inputs_selects_scans_and_builds_the_map(tmp_path):
+    grid = maps.office(0.1)
+    run = sim.range_run(grid, np.random.default_rng(8), n_steps=12, dt=0.5, angles=io.carmen_angles(181),
+                        max_range=12.0, sensor="ideal")
+    log = io.LaserLog(times=run.times, odometry=run.poses, ranges=run.ranges, angles=run.angles,
+                      max_range=run.max_range, poses=run.poses)
+    path = io.write_carmen_log(tmp_path / "sim.log", log)
+    warnings: list[str] = []
+    got, built, desc = pipeline.read_inputs(pipeline.Inputs(log=path, build_map=True, resolution=0.1,
+                                                            scans=slice(2, 10)), min_range=0.05, warn=warnings.append)
+    assert len(got) == 8 and np.allclose(got.poses, run.poses[2:10], atol=1e-3)
+    assert desc == f"built from {path} (resolution 0.1 m)" and built.resolution == 0.1 and built.free.any()
+    assert warnings == []
