@@ -79,11 +79,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._checks import check_count, check_nonnegative, check_positive
+from .evidence import scan_fit
 from .geometry import angle_diff, circular_mean, compose, relative
 from .grid import OccupancyGrid
-from .evidence import scan_fit
-from .runloop import RunTrace, StateTrack, _intervals
 from .pipeline import RunResult, check_log_odometry, localize_log, settings_with
+from .runloop import RunTrace, StateTrack, _intervals
 from .settings import RunSettings
 
 __all__ = ["PASSES", "Smoothed", "SmoothResult", "reverse_log", "reverse_trace", "combine", "scan_fit_function",

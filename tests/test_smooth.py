@@ -318,13 +318,13 @@ def test_cli_smooth_on_a_one_scan_log_is_an_error_not_a_traceback(tmp_path):
 def test_run_filter_is_the_driver_of_both_passes(monkeypatch):
     """No second filtering loop: both passes go through localize.runloop.run_filter."""
     calls = []
-    import localize.mcl as mcl
+    import localize.runloop as runloop
 
     def spy(*a, **k):
         calls.append(a[1])
         return run_filter(*a, **k)
 
-    monkeypatch.setattr(mcl, "run_filter", spy)
+    monkeypatch.setattr(runloop, "run_filter", spy)
     log, _ = _office_log(0, 6)
     smooth.smooth_log(office(), log, rng=np.random.default_rng(0), n_particles=500, kld=None)
     assert calls == [6, 6]
