@@ -49,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from .io._common import FormatError
+from .io._yaml import load_yaml
 from .kld import KLDSampling
 from .mcl import Augmented
 
@@ -179,16 +180,8 @@ def _fmt(v: Any) -> str:
 
 
 def _load_yaml(path: Path) -> Any:
-    try:
-        import yaml
-    except ImportError:  # pragma: no cover - PyYAML comes with the ros extra
-        raise ImportError('reading AMCL parameter files needs PyYAML: pip install "localize[ros]"') from None
-    try:
-        return yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = mark.line + 1 if mark is not None else None
-        raise FormatError(path, line, f"not valid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    """The file's YAML (PyYAML); a key given twice is refused with its line, as ROS refuses the file."""
+    return load_yaml(path)
 
 
 def _find_params(doc: Any) -> tuple[dict, bool]:
