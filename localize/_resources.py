@@ -29,7 +29,8 @@ Measured (December 2026, numpy 2):
   500-720 bytes per cell on small maps and 60-75 on large ones (300 x 300:
   66 MB, 600 x 600: 195 MB, 2000 x 2000: 363 MB, 3000 x 3000: 676 MB).
 
-The constants below are those numbers rounded up by about 10%; the estimate
+The constants below are those numbers rounded up by about 10%; over those 15
+runs the estimate is 1.11 to 2.80 times the measured peak, never below it; the estimate
 of a run on a 10 000 x 10 000 map with the likelihood field and 300 000
 particles is 8.5 GB (issue 39 measured 8.7 GB for such a run; the old
 constants said 37 GB), and ``tests/test_cli_faults.py`` holds the estimate above a
