@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 pytest.importorskip("rosbags")
 
 from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg  # noqa: E402
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
 
 from localize import io  # noqa: E402
 from localize.io import FormatError, rosbag  # noqa: E402

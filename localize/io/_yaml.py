@@ -44,14 +44,17 @@ class _StrictLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
-def _syntax_error(path: Path, exc: yaml.YAMLError, text: str) -> FormatError:
+def _syntax_error(path: Path, exc: yaml.YAMLError, text: str, what: str | None = None) -> FormatError:
     mark = getattr(exc, "problem_mark", None)
     line = mark.line + 1 if mark is not None else None
     if isinstance(exc, yaml.reader.ReaderError):  # a character YAML does not allow
         line = text[:exc.position].count("\n") + 1
         ch = chr(exc.character) if isinstance(exc.character, int) else exc.character
         return FormatError(path, line, f"not valid YAML: the character {ch!r} is not allowed in YAML text")
-    return FormatError(path, line, f"not valid YAML: {getattr(exc, 'problem', None) or exc}")
+    problem = getattr(exc, "problem", None) or exc
+    if what is not None:
+        return FormatError(path, line, f"not valid YAML ({problem}): expected 'key: value' lines ({what})")
+    return FormatError(path, line, f"not valid YAML: {problem}")
 
 
 def load_yaml(path: PathLike, text: str | None = None) -> Any:
@@ -126,7 +129,7 @@ def load_yaml_mapping(path: PathLike, text: str, what: str) -> dict[str, tuple[A
             out[key] = (_plain_number(value_node, value), line)
         return out
     except yaml.YAMLError as exc:
-        raise _syntax_error(p, exc, text) from None
+        raise _syntax_error(p, exc, text, what) from None
     except (TypeError, ValueError, RecursionError) as exc:
         if isinstance(exc, FormatError):
             raise
