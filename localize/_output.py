@@ -159,13 +159,18 @@ class RunOutput:
 
     def _acquire(self) -> None:
         """Take the folder's lock (non-blocking) or refuse, naming the run that holds it."""
-        lock = FileLock(self.folder / LOCK_NAME, timeout=0)
-        try:
-            lock.acquire()
-        except Timeout:
-            raise ValueError(f"{self._where}: another run ({self._holder()}) is writing this folder; wait for it "
-                             "to finish or choose another output folder") from None
-        self._lock = lock
+        for _ in range(10):
+            lock = FileLock(self.folder / LOCK_NAME, timeout=0)
+            try:
+                lock.acquire()
+            except Timeout:
+                raise ValueError(f"{self._where}: another run ({self._holder()}) is writing this folder; wait for it "
+                                 "to finish or choose another output folder") from None
+            if _names_the_locked_file(lock):
+                self._lock = lock
+                return
+            lock.release()  # we locked a file its holder had just removed (see _release): take the new one
+        raise ValueError(f"{self._where}: the lock file {LOCK_NAME} keeps changing; is another program removing it?")
 
     def _holder(self) -> str:
         for stage in self.folder.glob(_STAGE_PREFIX + "*"):
@@ -330,6 +335,24 @@ class RunOutput:
                 _remove(target)
                 removed.append(target)
         return removed
+
+
+def _names_the_locked_file(lock: FileLock) -> bool:
+    """Whether the lock's path still names the file it locked.
+
+    A run that opened ``.localize.lock`` just before its holder removed it
+    (:meth:`RunOutput._release` removes it while still holding it) would lock
+    a file that no longer has a name, while a third run creates and locks a
+    new one. filelock 4 checks this itself; for older versions the locked
+    descriptor (not public API: skipped when absent) is compared with the path.
+    """
+    fd = getattr(getattr(lock, "_context", None), "lock_file_fd", None)
+    if not isinstance(fd, int):
+        return True
+    try:
+        return os.path.samestat(os.fstat(fd), os.stat(lock.lock_file))
+    except OSError:
+        return False
 
 
 def _reason(exc: OSError) -> str:

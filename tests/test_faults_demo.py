@@ -231,3 +231,29 @@ def test_a_new_demo_folder_interrupted_at_any_call_is_removed_or_whole(tmp_path_
         assert snapshot(out) == {"notes.txt": b"the user's own file"}
     else:
         assert not (base / "new").exists()  # the folders made for the run are gone
+
+
+# ------------------------------------------------------------------ the lock file removed while held
+def test_a_lock_on_a_file_its_holder_removed_is_detected(tmp_path):
+    from filelock import FileLock
+
+    lock = FileLock(tmp_path / _output.LOCK_NAME, timeout=0)
+    lock.acquire()
+    try:
+        assert _output._names_the_locked_file(lock)
+        (tmp_path / _output.LOCK_NAME).unlink()  # what a finishing holder does while a second run opens the file
+        assert not _output._names_the_locked_file(lock)
+    finally:
+        lock.release()
+
+
+def test_a_stale_lock_is_given_back_and_the_new_file_taken(tmp_path, monkeypatch):
+    answers = iter([False, True])
+    monkeypatch.setattr(_output, "_names_the_locked_file", lambda lock: next(answers))
+    out = tmp_path / "o"
+    with _output.RunOutput(out) as o:
+        o.open()
+        assert (out / _output.LOCK_NAME).exists() and o._lock is not None and o._lock.is_locked
+        o.path("summary.json").write_text("{}")
+        o.commit()
+    assert snapshot(out) == {"summary.json": b"{}"}
