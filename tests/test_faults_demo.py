@@ -257,3 +257,25 @@ def test_a_stale_lock_is_given_back_and_the_new_file_taken(tmp_path, monkeypatch
         o.path("summary.json").write_text("{}")
         o.commit()
     assert snapshot(out) == {"summary.json": b"{}"}
+
+
+# ------------------------------------------------------------------ any demo (hypothesis)
+@settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**32 - 1), steps=st.integers(2, 12))
+def test_any_demo_writes_one_whole_run_whose_score_is_its_files(tmp_path_factory, seed, steps):
+    import numpy as np
+
+    from localize import io
+
+    out = tmp_path_factory.mktemp("anydemo") / "d"
+    status, _, err = run_cli("demo", "--out", out, "--seed", seed, "--steps", steps, "--particles", 100,
+                             "--no-animate", "--quiet")
+    assert status == 0, err
+    assert _complete(out)
+    s = json.loads((out / "summary.json").read_text())
+    t_est, est = io.read_tum(out / "trajectory.tum")
+    t_true, truth = io.read_tum(out / "truth.tum")
+    assert len(est) == len(truth) == steps and np.allclose(t_est, t_true)
+    final = float(np.hypot(*(est[-1, :2] - truth[-1, :2])))
+    assert abs(s["demo"]["final_error_m"] - final) <= 1e-3  # rounded to mm, from the files as written
+    assert s["settings"]["seed"] == seed
