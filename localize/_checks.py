@@ -14,9 +14,11 @@ length of the last axis: a ``(3, 5)`` array given the wrong way round (rows x,
 y and theta of five particles) has 5 columns and is rejected. Only a
 ``(3, 3)`` array is ambiguous: three particles, or the rows x, y, theta of
 three particles? It is read as three particles (rows); :func:`check_poses`
-warns with :class:`PoseShapeWarning` when its third column does not look like
-headings (values outside ``[-pi, pi]``) while its third row does, the
-fingerprint of a transposed array.
+warns with :class:`PoseShapeWarning` whenever its third column does not look
+like headings (values outside ``[-pi, pi]``): with the fix ``.T`` when its
+third row does (the fingerprint of a transposed array), else saying that
+headings are radians. An array whose third column is headings is read
+silently, as are symmetric ones (both readings are the same).
 
 Examples
 --------
@@ -259,13 +261,23 @@ def check_poses(poses: ArrayLike, name: str = "particles", stacklevel: int = 3) 
         raise ValueError(f"{name} must be an (N, 3) array, one particle (x, y, theta) per row; "
                          f"got shape {p.shape}{hint}")
     p = as_poses(p, name)
-    if p.shape == (3, 3):
-        col_ok = bool(np.all(np.abs(p[:, 2]) <= np.pi))
-        row_ok = bool(np.all(np.abs(p[2, :]) <= np.pi))
-        if row_ok and not col_ok:
-            warnings.warn(
-                f"{name} has shape (3, 3) and is read as 3 particles, one (x, y, theta) per row; its third column "
-                f"{np.round(p[:, 2], 3).tolist()} does not look like headings in [-pi, pi] but its third row does: "
-                "if the rows are x, y and theta, pass its transpose .T",
-                PoseShapeWarning, stacklevel=stacklevel)
+    if p.shape == (3, 3) and not np.array_equal(p, p.T):  # a symmetric array reads the same both ways
+        why = _ambiguity(p)
+        if why:
+            warnings.warn(f"{name} has shape (3, 3) and is read as 3 particles, one (x, y, theta) per row; {why}",
+                          PoseShapeWarning, stacklevel=stacklevel)
     return p
+
+
+def _ambiguity(p: NDArray[np.float64]) -> str:
+    """Why a (3, 3) particle array may be meant the other way round ("" when its rows are clearly particles)."""
+    col_ok = bool(np.all(np.abs(p[:, 2]) <= np.pi))
+    row_ok = bool(np.all(np.abs(p[2, :]) <= np.pi))
+    column = np.round(p[:, 2], 3).tolist()
+    if row_ok and not col_ok:
+        return (f"its third column {column} does not look like headings in [-pi, pi] but its third row does: "
+                "if the rows are x, y and theta, pass its transpose .T")
+    if not col_ok:
+        return (f"its third column {column} does not look like headings in [-pi, pi] (nor does its third row): "
+                "headings are radians, one per row")
+    return ""  # both readings plausible: read as rows, as documented (warning here would flag every 3-particle test)

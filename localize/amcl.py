@@ -49,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from .io._common import FormatError
+from .io._yaml import load_yaml
 from .kld import KLDSampling
 from .mcl import Augmented
 
@@ -179,16 +180,8 @@ def _fmt(v: Any) -> str:
 
 
 def _load_yaml(path: Path) -> Any:
-    try:
-        import yaml
-    except ImportError:  # pragma: no cover - PyYAML comes with the ros extra
-        raise ImportError('reading AMCL parameter files needs PyYAML: pip install "localize[ros]"') from None
-    try:
-        return yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = mark.line + 1 if mark is not None else None
-        raise FormatError(path, line, f"not valid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    """The file's YAML (PyYAML); a key given twice is refused with its line, as ROS refuses the file."""
+    return load_yaml(path)
 
 
 def _find_params(doc: Any) -> tuple[dict, bool]:
@@ -238,6 +231,230 @@ def read_amcl_params(path: PathLike) -> AmclMapping:
     return amcl_settings(params, source=str(p), nav2=nav2 or None, lines=text)
 
 
+class _Params:
+    """The parameters of one AMCL file in canonical (nav2) names, with the file's names, lines and defaults."""
+
+    def __init__(self, params: dict, source: str, nav2: bool | None, lines: list[str] | None) -> None:
+        self.source, self.lines = source, lines
+        self.orig = {str(k): v for k, v in params.items()}
+        self.names: dict[str, str] = {}  # canonical -> name in the file
+        self.vals: dict[str, Any] = {}
+        ros1_hits = 0
+        for k, v in self.orig.items():
+            c = ROS1_NAMES.get(k, k)
+            ros1_hits += k in ROS1_NAMES
+            if c in self.names and self.names[c] != k:
+                raise FormatError(source, self.where(k), f"{k} and {self.names[c]} set the same AMCL parameter; "
+                                                         "keep one")
+            self.names[c], self.vals[c] = k, v
+        known = set(NAV2_DEFAULTS) | {"selective_resampling"} | {n for ns in _IGNORED.values() for n in ns}
+        if not (set(self.vals) & known):
+            raise FormatError(source, None, "no AMCL parameters found: expected keys such as alpha1 / odom_alpha1, "
+                                            f"max_particles, laser_model_type; got {', '.join(sorted(self.orig))}")
+        self.nav2 = ros1_hits == 0 if nav2 is None else nav2
+        self.defaults = NAV2_DEFAULTS if self.nav2 else ROS1_DEFAULTS
+        self.used: set[str] = set()
+        self._ros1_name = {v: k for k, v in ROS1_NAMES.items()}
+
+    def where(self, name: str) -> int | None:
+        """The line of ``name: ...`` in the file (None without the file's lines)."""
+        if self.lines:
+            pat = re.compile(rf"^\s*{re.escape(name)}\s*:")
+            for n, s in enumerate(self.lines, start=1):
+                if pat.match(s):
+                    return n
+        return None
+
+    def error(self, c: str, message: str) -> FormatError:
+        return FormatError(self.source, self.where(self.label(c)), message)
+
+    def get(self, c: str) -> Any:
+        self.used.add(c)
+        return self.vals.get(c, self.defaults[c])
+
+    def label(self, c: str) -> str:
+        """The parameter's name in the file, or its name in the file's dialect with ``(default)``."""
+        return self.names.get(c) or (c if self.nav2 else self._ros1_name.get(c, c)) + " (default)"
+
+    def num(self, c: str, lo: float | None = None, hi: float | None = None, integer: bool = False) -> float:
+        v = self.get(c)
+        name = self.names.get(c, c)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+            raise FormatError(self.source, self.where(name), f"{name} must be a number; got {v!r}")
+        if integer and float(v) != int(v):
+            raise FormatError(self.source, self.where(name), f"{name} must be a whole number; got {v!r}")
+        v = float(v)
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            rng_txt = f"[{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
+            raise FormatError(self.source, self.where(name), f"{name} must lie in {rng_txt}; got {v:g}")
+        return int(v) if integer else v
+
+    def ignore_if_given(self, m: "AmclMapping", c: str, reason: str) -> None:
+        self.used.add(c)
+        if c in self.vals:
+            m.ignored.append((self.names[c], self.vals[c], reason))
+
+
+_MOTION_MODELS = ("diff", "diff-corrected", "omni", "omni-corrected", "differential", "omnidirectional",
+                  "nav2_amcl::differentialmotionmodel", "nav2_amcl::omnimotionmodel")
+
+
+def _motion(p: _Params, m: AmclMapping) -> tuple[float, float]:
+    """Odometry alphas (PR variances) from the file's model; returns update_min_d, update_min_a."""
+    mt = str(p.get("robot_model_type"))
+    mt_l = mt.lower()
+    omni = "omni" in mt_l
+    if mt_l not in _MOTION_MODELS:
+        raise p.error("robot_model_type", f"{p.label('robot_model_type')}: unknown motion model {mt!r}; expected "
+                      "diff, diff-corrected, omni, omni-corrected (ROS 1) or nav2_amcl::DifferentialMotionModel / "
+                      "nav2_amcl::OmniMotionModel (nav2)")
+    a = [p.num(f"alpha{i}", lo=0.0) for i in range(1, 5)]
+    d_ref, a_ref = p.num("update_min_d", lo=0.0), p.num("update_min_a", lo=0.0)
+    note = "as variances, PR table 5.6 (AMCL draws with sqrt of the same sums)"
+    if mt_l in ("omni", "omni-corrected"):  # ROS 1 omni: code uses alpha1 <-> alpha4 against the docs
+        a = [a[3], a[1], a[2], a[0]]
+        note = "ROS 1 omni model: alpha1 and alpha4 swapped back (navigation issue 542)"
+    if mt_l in ("diff", "omni"):  # ROS 1 uncorrected: the sums are standard deviations
+        dr, ar = max(d_ref, 0.05), max(a_ref, 0.05)
+        a = [a[0] ** 2 * ar**2, a[1] ** 2 * dr**2, a[2] ** 2 * dr**2, a[3] ** 2 * ar**2]
+        note = (f"ROS 1 '{mt}' model draws with std = alpha*x**2 (no sqrt): converted term by term to PR variances "
+                f"at one step of {dr:g} m / {ar:g} rad" + (", alpha1/alpha4 swap undone" if omni else ""))
+    m.settings["alphas"] = tuple(round(x, 9) for x in a)
+    m.rows.append((", ".join(p.label(f"alpha{i}") for i in range(1, 5)) + f" [{p.label('robot_model_type')}={mt}]",
+                   tuple(p.get(f"alpha{i}") for i in range(1, 5)), f"alphas = {_fmt(m.settings['alphas'])}", note))
+    if omni:
+        m.ignored.append((p.label("alpha5"), p.get("alpha5"), "omni strafe noise: localize has the differential-"
+                                                               "drive odometry model only"))
+    elif "alpha5" in p.vals:
+        m.ignored.append((p.names["alpha5"], p.vals["alpha5"], "used by the omni model only (as in AMCL)"))
+    p.used.add("alpha5")
+    return d_ref, a_ref
+
+
+def _laser(p: _Params, m: AmclMapping) -> str:
+    """Sensor model, beams and ranges; returns the sensor."""
+    s, rows = m.settings, m.rows
+    lm = str(p.get("laser_model_type"))
+    if lm not in ("likelihood_field", "beam", "likelihood_field_prob"):
+        raise FormatError(p.source, p.where("laser_model_type"), f"laser_model_type: unknown model {lm!r}; expected "
+                                                                 "likelihood_field, beam or likelihood_field_prob")
+    sensor = "beam" if lm == "beam" else "likelihood"
+    s["sensor"] = sensor
+    rows.append((p.label("laser_model_type"), lm, f"sensor = {sensor}",
+                 "beam skipping of likelihood_field_prob is not implemented" if lm == "likelihood_field_prob" else ""))
+    s["beams"] = p.num("max_beams", lo=1, integer=True)
+    rows.append((p.label("max_beams"), s["beams"], f"beams = {s['beams']}", "evenly spread, first and last kept"))
+    lo_r, hi_r = p.num("laser_min_range"), p.num("laser_max_range")
+    if lo_r > 0 and hi_r > 0 and lo_r >= hi_r:
+        raise p.error("laser_min_range", f"{p.label('laser_min_range')} ({lo_r:g}) must be below "
+                                         f"{p.label('laser_max_range')} ({hi_r:g}): no reading would be valid")
+    s["min_range"] = lo_r if lo_r > 0 else None
+    rows.append((p.label("laser_min_range"), lo_r, f"min_range = {_fmt(s['min_range'])}",
+                 "the scan's range_min" if lo_r <= 0 else "shorter readings count as no return"))
+    s["max_range"] = hi_r if hi_r > 0 else None
+    rows.append((p.label("laser_max_range"), hi_r, f"max_range = {_fmt(s['max_range'])}",
+                 "the scan's range_max" if hi_r <= 0 else ""))
+    return sensor
+
+
+def _likelihood_params(p: _Params, m: AmclMapping) -> dict[str, Any]:
+    sp: dict[str, Any] = {}
+    zh, zr = p.num("z_hit", lo=0.0), p.num("z_rand", lo=0.0)
+    if zh + zr <= 0:
+        raise p.error("z_hit", "z_hit + z_rand must be positive")
+    sp["z_hit"], sp["z_rand"] = round(zh / (zh + zr), 12), round(zr / (zh + zr), 12)
+    m.rows.append((f"{p.label('z_hit')}, {p.label('z_rand')}", (zh, zr),
+                   f"z_hit = {sp['z_hit']:g}, z_rand = {sp['z_rand']:g}", "normalised to sum 1"))
+    for c in ("z_short", "z_max", "lambda_short"):
+        p.ignore_if_given(m, c, "not used by the likelihood field model (nor by AMCL's)")
+    md = p.num("laser_likelihood_max_dist", lo=1e-9)
+    sp["max_dist"] = md
+    m.rows.append((p.label("laser_likelihood_max_dist"), md, f"max_dist = {md:g}", "distance-field cap"))
+    return sp
+
+
+def _beam_params(p: _Params, m: AmclMapping) -> dict[str, Any]:
+    sp: dict[str, Any] = {}
+    weights = ("z_hit", "z_short", "z_max", "z_rand")
+    zs = [p.num(c, lo=0.0) for c in weights]
+    tot = sum(zs)
+    if tot <= 0:
+        raise p.error("z_hit", "z_hit + z_short + z_max + z_rand must be positive")
+    for c, v in zip(weights, zs):
+        sp[c] = round(v / tot, 12)
+    m.rows.append((", ".join(p.label(c) for c in weights), tuple(zs), ", ".join(f"{c} = {sp[c]:g}" for c in weights),
+                   "normalised to sum 1"))
+    sp["lambda_short"] = p.num("lambda_short", lo=1e-9)
+    m.rows.append((p.label("lambda_short"), sp["lambda_short"], f"lambda_short = {sp['lambda_short']:g}", ""))
+    if "laser_likelihood_max_dist" in p.vals:
+        p.ignore_if_given(m, "laser_likelihood_max_dist", "used by the likelihood field only (as in AMCL)")
+    p.used.add("laser_likelihood_max_dist")
+    return sp
+
+
+def _particles(p: _Params, m: AmclMapping) -> None:
+    """Particle count and KLD-sampling."""
+    s, rows = m.settings, m.rows
+    n_min, n_max = p.num("min_particles", lo=1, integer=True), p.num("max_particles", lo=1, integer=True)
+    if n_max < n_min:
+        raise p.error("max_particles", f"max_particles ({n_max}) must be >= min_particles ({n_min})")
+    err, z = p.num("pf_err", lo=1e-9, hi=1.0 - 1e-9), p.num("pf_z")
+    s["particles"] = n_max
+    pair, kld_pair = f"{p.label('min_particles')}, {p.label('max_particles')}", f"{p.label('pf_err')}, {p.label('pf_z')}"
+    if n_min == n_max:
+        s["kld"] = None
+        rows.append((pair, (n_min, n_max), f"particles = {n_max}, no KLD-sampling", "min = max"))
+        if "pf_err" in p.vals or "pf_z" in p.vals:
+            rows.append((kld_pair, (err, z), "unused", "min_particles = max_particles"))
+        return
+    delta = 0.5 * math.erfc(z / math.sqrt(2.0))
+    if not 0 < delta < 1:
+        raise p.error("pf_z", f"{p.label('pf_z')} = {z:g} gives no usable confidence")
+    s["kld"] = KLDSampling(epsilon=err, delta=delta, n_min=n_min, n_max=n_max)
+    rows.append((pair, (n_min, n_max), f"particles = {n_max} at the start, KLD-sampling between {n_min} and {n_max}",
+                 "AMCL starts with max_particles"))
+    rows.append((kld_pair, (err, z), f"KLD epsilon = {err:g}, delta = {delta:.4g}",
+                 "pf_z is the normal quantile z_(1-delta); bins 0.5 m x 0.5 m x 10 deg as AMCL's kd-tree"))
+
+
+def _recovery(p: _Params, m: AmclMapping) -> None:
+    """Augmented MCL from recovery_alpha_slow / _fast."""
+    slow, fast = p.num("recovery_alpha_slow", lo=0.0, hi=1.0), p.num("recovery_alpha_fast", lo=0.0, hi=1.0)
+    pair = f"{p.label('recovery_alpha_slow')}, {p.label('recovery_alpha_fast')}"
+    if slow == 0 and fast == 0:
+        m.settings["augmented"] = None
+        m.rows.append((pair, (slow, fast), "augmented MCL off", ""))
+        return
+    try:
+        m.settings["augmented"] = Augmented(alpha_slow=slow, alpha_fast=fast)
+    except ValueError as exc:
+        raise p.error("recovery_alpha_slow", f"recovery_alpha_slow/fast: {exc} (AMCL needs 0 < slow < fast < 1, "
+                                             "e.g. 0.001, 0.1)") from None
+    m.rows.append((pair, (slow, fast), f"augmented MCL (alpha_slow = {slow:g}, alpha_fast = {fast:g})", "PR table 8.3"))
+
+
+def _resampling(p: _Params, m: AmclMapping) -> None:
+    """resample_interval and ROS 1's selective_resampling as a resampling threshold."""
+    s = m.settings
+    ri = p.num("resample_interval", lo=1, integer=True)
+    sel = p.orig.get("selective_resampling")
+    if sel is not None:
+        p.used.add("selective_resampling")
+    if sel is True:
+        s["resample_threshold"] = 0.5
+        m.rows.append(("selective_resampling", True, "resample_threshold = 0.5", "resample when N_eff < N/2"))
+        if ri != 1:
+            m.ignored.append((p.label("resample_interval"), ri, "with selective resampling localize resamples "
+                                                                 "whenever N_eff < N/2"))
+    elif ri == 1:
+        s["resample_threshold"] = 1.0
+        m.rows.append((p.label("resample_interval"), ri, "resample_threshold = 1", "resample after every update"))
+    else:
+        s["resample_threshold"] = 0.5
+        m.ignored.append((p.label("resample_interval"), ri, "resampling every k-th update has no counterpart; "
+                                                             "localize resamples when N_eff < N/2"))
+
+
 def amcl_settings(params: dict, source: str = "<dict>", nav2: bool | None = None,
                   lines: list[str] | None = None) -> AmclMapping:
     """Map a dict of AMCL parameters (either dialect) to localize settings; see :func:`read_amcl_params`.
@@ -248,210 +465,25 @@ def amcl_settings(params: dict, source: str = "<dict>", nav2: bool | None = None
     >>> m.dialect, m.settings["particles"], round(m.settings["kld"].delta, 3), m.settings["kld"].n_min
     ('ros1', 2000, 0.161, 500)
     """
-
-    def where(name: str) -> int | None:
-        if lines:
-            pat = re.compile(rf"^\s*{re.escape(name)}\s*:")
-            for n, s in enumerate(lines, start=1):
-                if pat.match(s):
-                    return n
-        return None
-
     if not isinstance(params, dict) or not params:
         raise FormatError(source, None, "no AMCL parameters found: expected keys such as alpha1 / odom_alpha1, "
                                         "max_particles, laser_model_type (nav2: under amcl: ros__parameters:)")
-    orig = {str(k): v for k, v in params.items()}
-    names: dict[str, str] = {}  # canonical -> name in the file
-    vals: dict[str, Any] = {}
-    ros1_hits = 0
-    for k, v in orig.items():
-        c = ROS1_NAMES.get(k, k)
-        if k in ROS1_NAMES:
-            ros1_hits += 1
-        if c in names and names[c] != k:
-            raise FormatError(source, where(k), f"{k} and {names[c]} set the same AMCL parameter; keep one")
-        names[c], vals[c] = k, v
-    known = set(NAV2_DEFAULTS) | {"selective_resampling"} | {n for ns in _IGNORED.values() for n in ns}
-    if not (set(vals) & known):
-        raise FormatError(source, None, "no AMCL parameters found: expected keys such as alpha1 / odom_alpha1, "
-                                        f"max_particles, laser_model_type; got {', '.join(sorted(orig))}")
-    if nav2 is None:
-        nav2 = ros1_hits == 0
-    dialect = "nav2" if nav2 else "ros1"
-    defaults = NAV2_DEFAULTS if nav2 else ROS1_DEFAULTS
-    m = AmclMapping(dialect=dialect, source=source)
-    used: set[str] = set()
-
-    def get(c: str) -> Any:
-        used.add(c)
-        return vals.get(c, defaults[c])
-
-    ros1_name = {v: k for k, v in ROS1_NAMES.items()}
-
-    def label(c: str) -> str:
-        return names.get(c) or (c if nav2 else ros1_name.get(c, c)) + " (default)"
-
-    def num(c: str, lo: float | None = None, hi: float | None = None, integer: bool = False) -> float:
-        v = get(c)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-            raise FormatError(source, where(names.get(c, c)), f"{names.get(c, c)} must be a number; got {v!r}")
-        if integer and float(v) != int(v):
-            raise FormatError(source, where(names.get(c, c)), f"{names.get(c, c)} must be a whole number; got {v!r}")
-        v = float(v)
-        if (lo is not None and v < lo) or (hi is not None and v > hi):
-            rng_txt = f"[{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
-            raise FormatError(source, where(names.get(c, c)), f"{names.get(c, c)} must lie in {rng_txt}; got {v:g}")
-        return int(v) if integer else v
-
-    s = m.settings
-    rows = m.rows
-    # ------------------------------------------------------------ motion model
-    mt = str(get("robot_model_type"))
-    mt_l = mt.lower()
-    omni = "omni" in mt_l
-    if mt_l not in ("diff", "diff-corrected", "omni", "omni-corrected", "differential", "omnidirectional",
-                    "nav2_amcl::differentialmotionmodel", "nav2_amcl::omnimotionmodel"):
-        raise FormatError(source, where(label("robot_model_type")), f"{label('robot_model_type')}: unknown motion "
-                          f"model {mt!r}; expected diff, diff-corrected, omni, omni-corrected (ROS 1) or "
-                          "nav2_amcl::DifferentialMotionModel / nav2_amcl::OmniMotionModel (nav2)")
-    a = [num(f"alpha{i}", lo=0.0) for i in range(1, 5)]
-    d_ref, a_ref = num("update_min_d", lo=0.0), num("update_min_a", lo=0.0)
-    note = "as variances, PR table 5.6 (AMCL draws with sqrt of the same sums)"
-    if mt_l in ("omni", "omni-corrected"):  # ROS 1 omni: code uses alpha1 <-> alpha4 against the docs
-        a = [a[3], a[1], a[2], a[0]]
-        note = "ROS 1 omni model: alpha1 and alpha4 swapped back (navigation issue 542)"
-    if mt_l in ("diff", "omni"):  # ROS 1 uncorrected: the sums are standard deviations
-        dr = max(d_ref, 0.05)
-        ar = max(a_ref, 0.05)
-        a = [a[0] ** 2 * ar**2, a[1] ** 2 * dr**2, a[2] ** 2 * dr**2, a[3] ** 2 * ar**2]
-        note = (f"ROS 1 '{mt}' model draws with std = alpha*x**2 (no sqrt): converted term by term to PR variances "
-                f"at one step of {dr:g} m / {ar:g} rad" + (", alpha1/alpha4 swap undone" if omni else ""))
-    s["alphas"] = tuple(round(x, 9) for x in a)
-    rows.append((", ".join(label(f"alpha{i}") for i in range(1, 5)) + f" [{label('robot_model_type')}={mt}]",
-                 tuple(get(f"alpha{i}") for i in range(1, 5)), f"alphas = {_fmt(s['alphas'])}", note))
-    if omni:
-        m.ignored.append((label("alpha5"), get("alpha5"), "omni strafe noise: localize has the differential-drive "
-                                                            "odometry model only"))
-    elif "alpha5" in vals:
-        m.ignored.append((names["alpha5"], vals["alpha5"], "used by the omni model only (as in AMCL)"))
-    used.add("alpha5")
-    # ------------------------------------------------------------ sensor
-    lm = str(get("laser_model_type"))
-    if lm not in ("likelihood_field", "beam", "likelihood_field_prob"):
-        raise FormatError(source, where("laser_model_type"), f"laser_model_type: unknown model {lm!r}; expected "
-                                                             "likelihood_field, beam or likelihood_field_prob")
-    sensor = "beam" if lm == "beam" else "likelihood"
-    s["sensor"] = sensor
-    rows.append((label("laser_model_type"), lm, f"sensor = {sensor}",
-                 "beam skipping of likelihood_field_prob is not implemented" if lm == "likelihood_field_prob" else ""))
-    s["beams"] = num("max_beams", lo=1, integer=True)
-    rows.append((label("max_beams"), s["beams"], f"beams = {s['beams']}", "evenly spread, first and last kept"))
-    lo_r, hi_r = num("laser_min_range"), num("laser_max_range")
-    s["min_range"] = lo_r if lo_r > 0 else None
-    rows.append((label("laser_min_range"), lo_r, f"min_range = {_fmt(s['min_range'])}",
-                 "the scan's range_min" if lo_r <= 0 else "shorter readings count as no return"))
-    s["max_range"] = hi_r if hi_r > 0 else None
-    rows.append((label("laser_max_range"), hi_r, f"max_range = {_fmt(s['max_range'])}",
-                 "the scan's range_max" if hi_r <= 0 else ""))
-    sp: dict[str, Any] = {}
-    if sensor == "likelihood":
-        zh, zr = num("z_hit", lo=0.0), num("z_rand", lo=0.0)
-        if zh + zr <= 0:
-            raise FormatError(source, where(label("z_hit")), "z_hit + z_rand must be positive")
-        sp["z_hit"], sp["z_rand"] = round(zh / (zh + zr), 12), round(zr / (zh + zr), 12)
-        rows.append((f"{label('z_hit')}, {label('z_rand')}", (zh, zr),
-                     f"z_hit = {sp['z_hit']:g}, z_rand = {sp['z_rand']:g}", "normalised to sum 1"))
-        for c in ("z_short", "z_max", "lambda_short"):
-            used.add(c)
-            if c in vals:
-                m.ignored.append((names[c], vals[c], "not used by the likelihood field model (nor by AMCL's)"))
-        md = num("laser_likelihood_max_dist", lo=1e-9)
-        sp["max_dist"] = md
-        rows.append((label("laser_likelihood_max_dist"), md, f"max_dist = {md:g}", "distance-field cap"))
-    else:
-        zs = [num(c, lo=0.0) for c in ("z_hit", "z_short", "z_max", "z_rand")]
-        tot = sum(zs)
-        if tot <= 0:
-            raise FormatError(source, where(label("z_hit")), "z_hit + z_short + z_max + z_rand must be positive")
-        for c, v in zip(("z_hit", "z_short", "z_max", "z_rand"), zs):
-            sp[c] = round(v / tot, 12)
-        rows.append((", ".join(label(c) for c in ("z_hit", "z_short", "z_max", "z_rand")), tuple(zs),
-                     ", ".join(f"{c} = {sp[c]:g}" for c in ("z_hit", "z_short", "z_max", "z_rand")),
-                     "normalised to sum 1"))
-        sp["lambda_short"] = num("lambda_short", lo=1e-9)
-        rows.append((label("lambda_short"), sp["lambda_short"], f"lambda_short = {sp['lambda_short']:g}", ""))
-        used.add("laser_likelihood_max_dist")
-        if "laser_likelihood_max_dist" in vals:
-            m.ignored.append(("laser_likelihood_max_dist", vals["laser_likelihood_max_dist"],
-                              "used by the likelihood field only (as in AMCL)"))
-    s["sigma_hit"] = num("sigma_hit", lo=1e-9)
-    rows.append((label("sigma_hit"), s["sigma_hit"], f"sigma_hit = {s['sigma_hit']:g}", ""))
-    s["sensor_params"] = sp
-    # ------------------------------------------------------------ particles, KLD
-    n_min, n_max = num("min_particles", lo=1, integer=True), num("max_particles", lo=1, integer=True)
-    if n_max < n_min:
-        raise FormatError(source, where(label("max_particles")), f"max_particles ({n_max}) must be >= min_particles "
-                                                                  f"({n_min})")
-    err, z = num("pf_err", lo=1e-9, hi=1.0 - 1e-9), num("pf_z")
-    s["particles"] = n_max
-    if n_min == n_max:
-        s["kld"] = None
-        rows.append((f"{label('min_particles')}, {label('max_particles')}", (n_min, n_max),
-                     f"particles = {n_max}, no KLD-sampling", "min = max"))
-        if "pf_err" in vals or "pf_z" in vals:
-            rows.append((f"{label('pf_err')}, {label('pf_z')}", (err, z), "unused", "min_particles = max_particles"))
-    else:
-        delta = 0.5 * math.erfc(z / math.sqrt(2.0))
-        if not 0 < delta < 1:
-            raise FormatError(source, where(label("pf_z")), f"{label('pf_z')} = {z:g} gives no usable confidence")
-        s["kld"] = KLDSampling(epsilon=err, delta=delta, n_min=n_min, n_max=n_max)
-        rows.append((f"{label('min_particles')}, {label('max_particles')}", (n_min, n_max),
-                     f"particles = {n_max} at the start, KLD-sampling between {n_min} and {n_max}",
-                     "AMCL starts with max_particles"))
-        rows.append((f"{label('pf_err')}, {label('pf_z')}", (err, z),
-                     f"KLD epsilon = {err:g}, delta = {delta:.4g}",
-                     "pf_z is the normal quantile z_(1-delta); bins 0.5 m x 0.5 m x 10 deg as AMCL's kd-tree"))
-    # ------------------------------------------------------------ recovery
-    slow, fast = num("recovery_alpha_slow", lo=0.0, hi=1.0), num("recovery_alpha_fast", lo=0.0, hi=1.0)
-    if slow == 0 and fast == 0:
-        s["augmented"] = None
-        rows.append((f"{label('recovery_alpha_slow')}, {label('recovery_alpha_fast')}", (slow, fast),
-                     "augmented MCL off", ""))
-    else:
-        try:
-            s["augmented"] = Augmented(alpha_slow=slow, alpha_fast=fast)
-        except ValueError as exc:
-            raise FormatError(source, where(label("recovery_alpha_slow")),
-                              f"recovery_alpha_slow/fast: {exc} (AMCL needs 0 < slow < fast < 1, e.g. 0.001, 0.1)"
-                              ) from None
-        rows.append((f"{label('recovery_alpha_slow')}, {label('recovery_alpha_fast')}", (slow, fast),
-                     f"augmented MCL (alpha_slow = {slow:g}, alpha_fast = {fast:g})", "PR table 8.3"))
-    # ------------------------------------------------------------ updates and resampling
-    s["min_motion"] = (d_ref, a_ref)
-    rows.append((f"{label('update_min_d')}, {label('update_min_a')}", (d_ref, a_ref),
-                 f"min_motion = ({d_ref:g}, {a_ref:g})", ""))
-    ri = num("resample_interval", lo=1, integer=True)
-    sel = orig.get("selective_resampling")
-    if sel is not None:
-        used.add("selective_resampling")
-    if sel is True:
-        s["resample_threshold"] = 0.5
-        rows.append(("selective_resampling", True, "resample_threshold = 0.5", "resample when N_eff < N/2"))
-        if ri != 1:
-            m.ignored.append((label("resample_interval"), ri, "with selective resampling localize resamples "
-                                                               "whenever N_eff < N/2"))
-    elif ri == 1:
-        s["resample_threshold"] = 1.0
-        rows.append((label("resample_interval"), ri, "resample_threshold = 1", "resample after every update"))
-    else:
-        s["resample_threshold"] = 0.5
-        m.ignored.append((label("resample_interval"), ri, "resampling every k-th update has no counterpart; "
-                                                           "localize resamples when N_eff < N/2"))
-    # ------------------------------------------------------------ the rest
+    p = _Params(params, source, nav2, lines)
+    m = AmclMapping(dialect="nav2" if p.nav2 else "ros1", source=source)
+    d_ref, a_ref = _motion(p, m)
+    sensor = _laser(p, m)
+    sp = _likelihood_params(p, m) if sensor == "likelihood" else _beam_params(p, m)
+    m.settings["sigma_hit"] = p.num("sigma_hit", lo=1e-9)
+    m.rows.append((p.label("sigma_hit"), m.settings["sigma_hit"], f"sigma_hit = {m.settings['sigma_hit']:g}", ""))
+    m.settings["sensor_params"] = sp
+    _particles(p, m)
+    _recovery(p, m)
+    m.settings["min_motion"] = (d_ref, a_ref)
+    m.rows.append((f"{p.label('update_min_d')}, {p.label('update_min_a')}", (d_ref, a_ref),
+                   f"min_motion = ({d_ref:g}, {a_ref:g})", ""))
+    _resampling(p, m)
     reasons = {n: r for r, ns in _IGNORED.items() for n in ns}
-    for c, k in names.items():
-        if c in used:
-            continue
-        reason = reasons.get(c, "unknown AMCL parameter")
-        m.ignored.append((k, vals[c], reason))
+    for c, k in p.names.items():
+        if c not in p.used:
+            m.ignored.append((k, p.vals[c], reasons.get(c, "unknown AMCL parameter")))
     return m

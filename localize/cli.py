@@ -675,38 +675,44 @@ def _report(summary: dict, n_scans: int, written: list[Path], smooth: bool) -> s
 
 
 def _cmd_demo(args, out: TextIO, err: TextIO) -> int:
-    from .demo import make_demo
+    from ._output import RESULT_FILES
+    from .demo import DEMO_FILES, make_demo
     from .io.tum import read_tum
 
     quiet = args.quiet
     rng = np.random.default_rng(args.seed)
-    d = make_demo(args.out, rng, steps=args.steps)
-    argv = ["run", "--map", str(d.map_path), "--log", str(d.log_path), "--out", str(args.out),
-            "--particles", str(args.particles), "--seed", str(args.seed), "--frames", str(args.frames)]
-    if not args.no_animate:
-        argv.append("--animate")
-    if quiet:
-        argv.append("--quiet")
+    score = {}
+
+    def add_score(dest: RunOutput) -> None:  # inside the staging folder, before anything appears in --out
+        _, est = read_tum(dest.path("trajectory.tum"))
+        e = np.hypot(*(est[:, :2] - d.poses[:, :2]).T)
+        cs = converged_at(e, 0.5, 20)
+        score.update({"truth": "truth.tum", "convergence_step_truth": cs,
+                      "median_error_after_convergence_m": None if cs is None else round(float(np.median(e[cs:])), 3),
+                      "final_error_m": round(float(e[-1]), 3)})
+        summary = json.loads(dest.path("summary.json").read_text())
+        summary["demo"] = score
+        summary["settings"].update(map=str(args.out / "map.dat"), log=str(args.out / "robot.log"))
+        summary["files"] = [*DEMO_FILES, *summary["files"]]
+        write_summary(dest.path("summary.json"), summary)
+
+    # the simulated files are staged with the results: one complete demo appears in --out, or nothing
+    with RunOutput(args.out, results=(*DEMO_FILES, *RESULT_FILES), before_commit=add_score) as dest:
+        dest.open()  # the lock first: a refused or interrupted demo leaves --out as it was
+        d = make_demo(dest.stage, rng, steps=args.steps)
+        argv = ["run", "--map", str(d.map_path), "--log", str(d.log_path), "--out", str(args.out),
+                "--particles", str(args.particles), "--seed", str(args.seed), "--frames", str(args.frames)]
+        argv += ([] if args.no_animate else ["--animate"]) + (["--quiet"] if quiet else [])
+        shown = [str(args.out / Path(a).name) if a in (str(d.map_path), str(d.log_path)) else a for a in argv]
+        if not quiet:
+            print(f"simulated {args.steps} scans of a robot in the built-in office (map with a moved cupboard, walls "
+                  f"drawn at another resolution, unmapped clutter): {', '.join(DEMO_FILES)}", file=out)
+            print("localizing: localize " + " ".join(shown), file=out)
+        run_args = build_parser().parse_args(argv)
+        run_args._argv = shown
+        code = _run(run_args, out, err, dest, _apply_amcl(run_args, out, err))
     if not quiet:
-        print(f"simulated {args.steps} scans of a robot in the built-in office (map with a moved cupboard, walls "
-              f"drawn at another resolution, unmapped clutter): wrote {d.map_path}, {d.log_path}, {d.truth_path}",
-              file=out)
-        print("localizing: localize " + " ".join(argv), file=out)
-    run_args = build_parser().parse_args(argv)
-    run_args._argv = argv
-    code = _cmd_run(run_args, out, err)
-    _, est = read_tum(args.out / "trajectory.tum")
-    e = np.hypot(*(est[:, :2] - d.poses[:, :2]).T)
-    cs = converged_at(e, 0.5, 20)
-    score = {"truth": d.truth_path.name, "convergence_step_truth": cs,
-             "median_error_after_convergence_m": None if cs is None else round(float(np.median(e[cs:])), 3),
-             "final_error_m": round(float(e[-1]), 3)}
-    summary_path = args.out / "summary.json"
-    summary = json.loads(summary_path.read_text())
-    summary["demo"] = score
-    summary_path.write_text(json.dumps(summary, indent=2))
-    if not quiet:
-        med = score["median_error_after_convergence_m"]
+        cs, med = score["convergence_step_truth"], score["median_error_after_convergence_m"]
         print(f"against the true poses: within 0.5 m from scan {cs}" + (f", median error {med} m after that"
                                                                            if med is not None else "")
               + f", final error {score['final_error_m']} m", file=out)

@@ -33,12 +33,14 @@ from .grid import OccupancyGrid
 from .io.cmu import write_cmu_map
 from .io.tum import write_tum
 
-__all__ = ["DemoData", "make_demo", "DEMO_SENSOR_OFFSET"]
+__all__ = ["DemoData", "make_demo", "DEMO_SENSOR_OFFSET", "DEMO_FILES"]
 
 PathLike = str | os.PathLike
 
 #: The laser's pose on the demo robot: 25 cm ahead of its centre, like the CMU 16-831 robot.
 DEMO_SENSOR_OFFSET = (0.25, 0.0, 0.0)
+#: The files :func:`make_demo` writes (``localize demo`` stages them with the run's results).
+DEMO_FILES = ("map.dat", "robot.log", "truth.tum")
 
 
 @dataclass(frozen=True)
@@ -114,8 +116,9 @@ def make_demo(folder: PathLike, rng: np.random.Generator, steps: int = 150) -> D
     office = maps.office(0.1)
     grid, boxes = sim.add_clutter(office, 1, rng, size=(0.8, 1.0), clearance=0.8, avoid=run.poses,
                                   avoid_radius=0.6)
-    map_path = write_cmu_map(out / "map.dat", grid)
-    log_path = sim.write_cmu_log(out / "robot.log", run)
-    truth = write_tum(out / "truth.tum", run.times, run.poses,
+    map_name, log_name, truth_name = DEMO_FILES
+    map_path = write_cmu_map(out / map_name, grid)
+    log_path = sim.write_cmu_log(out / log_name, run)
+    truth = write_tum(out / truth_name, run.times, run.poses,
                       comment="true poses of the simulated robot (localize demo)\ntimestamp x y z qx qy qz qw")
     return DemoData(map_path=map_path, log_path=log_path, truth_path=truth, run=run, grid=grid, cupboard=boxes[0])

@@ -203,6 +203,36 @@ def parse_floats(tokens: list[str], path: PathLike | None, line: int, what: str)
 _PER_SCAN_META = ("scan_lines", "neff")
 
 
+#: The farthest a laser can sit from the robot's centre (metres): a mounting pose beyond it is a mistake
+#: (``--laser-pose 1e308 0 0``, centimetres for metres) that would overflow the sensor model's arithmetic.
+MAX_SENSOR_OFFSET = 100.0
+
+
+def _sensor_offset(value: ArrayLike) -> NDArray[np.float64]:
+    """The laser's mounting pose (dx, dy, dtheta) in the robot's frame, checked: on the robot, in radians.
+
+    Examples
+    --------
+    >>> _sensor_offset([0.25, 0.0, 0.0]).tolist()
+    [0.25, 0.0, 0.0]
+    >>> _sensor_offset([1e308, 0.0, 0.0])
+    Traceback (most recent call last):
+    ...
+    ValueError: sensor_offset (the laser's mounting pose, --laser-pose) must place the laser within 100 m of the robot's centre; got (1e+308, 0, 0): metres, not centimetres?
+    """
+    raw = np.asarray(value, dtype=float)
+    if raw.shape != (3,):
+        raise ValueError(f"sensor_offset must be one pose (dx, dy, dtheta); got shape {raw.shape}")
+    shown = ", ".join(f"{v:g}" for v in raw)
+    if np.all(np.isfinite(raw)) and float(np.hypot(raw[0], raw[1])) > MAX_SENSOR_OFFSET:
+        raise ValueError(f"sensor_offset (the laser's mounting pose, --laser-pose) must place the laser within "
+                         f"{MAX_SENSOR_OFFSET:g} m of the robot's centre; got ({shown}): metres, not centimetres?")
+    if np.isfinite(raw[2]) and abs(raw[2]) > 2 * np.pi + 1e-9:
+        raise ValueError(f"sensor_offset (the laser's mounting pose, --laser-pose): its yaw must be radians in "
+                         f"[-2 pi, 2 pi]; got ({shown}): degrees? convert with np.radians")
+    return as_poses(raw, "sensor_offset")
+
+
 @dataclass(frozen=True, eq=False)
 class LaserLog:
     """A robot log of laser scans and odometry, in SI units, whatever file it came from.
@@ -291,9 +321,7 @@ class LaserLog:
         if not np.all(np.isfinite(ang)):
             raise ValueError("angles must be finite")
         mr = check_max_range(self.max_range)
-        off = as_poses(self.sensor_offset, "sensor_offset")
-        if off.shape != (3,):
-            raise ValueError(f"sensor_offset must be one pose (dx, dy, dtheta); got shape {off.shape}")
+        off = _sensor_offset(self.sensor_offset)
         poses = None
         if self.poses is not None:
             poses = as_poses(self.poses, "poses")

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import os
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +68,217 @@ def carmen_angles(n: int) -> NDArray[np.float64]:
         raise ValueError(f"a scan needs at least 2 readings; got {n}")
     step = np.pi / (n - 1) if n % 2 == 1 else np.pi / n
     return -np.pi / 2 + step * np.arange(n)
+
+
+@dataclass
+class _Records:
+    """What one pass over a CARMEN log keeps: scans of each kind, ODOM, NEFF and PARAM records, in file order."""
+
+    path: PathLike
+    on_error: str
+    skips: SkipCounter
+    params: dict[str, str] = field(default_factory=dict)
+    # per kind of scan: (line, record, t, ranges, laser pose, robot pose, angles, max_range)
+    scans: dict[str, list] = field(default_factory=lambda: {"FLASER": [], "ROBOTLASER1": []})
+    odom: list[tuple[int, float, NDArray]] = field(default_factory=list)  # (record index, t, pose)
+    neff: list[tuple[int, float]] = field(default_factory=list)  # (record index, value)
+    record: int = 0  # order of the records kept (scans, ODOM, NEFF)
+    beams: dict[str, tuple[int, int]] = field(default_factory=dict)  # kind -> (n, first line)
+
+    def bad(self, n: int, msg: str) -> None:
+        self.skips.malformed(n, msg, self.on_error)
+
+    def same_beams(self, kind: str, n: int, nb: int) -> bool:
+        """True if a scan of ``nb`` readings matches the first of its kind (else it is reported)."""
+        if kind in self.beams and self.beams[kind][0] != nb:
+            self.bad(n, f"expected {self.beams[kind][0]} readings like the first {kind} (line {self.beams[kind][1]}); "
+                        f"got {nb}")
+            return False
+        return True
+
+    def keep_scan(self, kind: str, n: int, item: tuple) -> None:
+        self.beams.setdefault(kind, (item[1].size, n))
+        t, r, lp, rp, ang, mr = item
+        self.scans[kind].append((n, self.record, t, r, lp, rp, ang, mr))
+        self.record += 1
+
+
+def _flaser_count(rec: _Records, n: int, tokens: list[str]) -> int | None:
+    """The reading count of a FLASER record, checked against its length (None: reported)."""
+    try:
+        nb = int(tokens[1]) if len(tokens) > 1 else -1
+    except ValueError:
+        rec.bad(n, f"FLASER field 2 is the number of readings; got {tokens[1]!r}")
+        return None
+    if nb < 2:
+        rec.bad(n, f"FLASER needs a reading count >= 2 in field 2; got {tokens[1] if len(tokens) > 1 else 'nothing'}")
+        return None
+    if len(tokens) not in (nb + 9, nb + 11):
+        rec.bad(n, f"FLASER with {nb} readings has {nb + 11} fields (FLASER n r1..r{nb} x y theta "
+                   f"odom_x odom_y odom_theta timestamp host logger_timestamp); got {len(tokens)}")
+        return None
+    return nb
+
+
+def _take_flaser(rec: _Records, n: int, tokens: list[str]) -> None:
+    nb = _flaser_count(rec, n, tokens)
+    if nb is None or not rec.same_beams("FLASER", n, nb):
+        return
+    v = rec.skips.floats(tokens[2:nb + 9], n, "FLASER", rec.on_error)
+    if v is None:
+        return
+    r = v[:nb]
+    if np.any(r < 0):
+        rec.bad(n, f"FLASER reading {int(np.flatnonzero(r < 0)[0]) + 1} is negative; expected a range >= 0 m")
+        return
+    rec.keep_scan("FLASER", n, (v[nb + 6], r, v[nb:nb + 3], v[nb + 3:nb + 6], None, None))
+
+
+def _take_robotlaser(rec: _Records, n: int, tokens: list[str]) -> None:
+    parsed = _parse_robotlaser(tokens, rec.path, n)
+    if isinstance(parsed, str):
+        rec.bad(n, parsed)
+        return
+    if not rec.same_beams("ROBOTLASER1", n, parsed[0].size):
+        return
+    r, lp, rp, t, ang, mr = parsed
+    rec.keep_scan("ROBOTLASER1", n, (t, r, lp, rp, ang, mr))
+
+
+def _take_odom(rec: _Records, n: int, tokens: list[str]) -> None:
+    if len(tokens) < 8:
+        rec.bad(n, f"ODOM is 'ODOM x y theta tv rv accel timestamp host logger_timestamp' (10 fields); "
+                   f"got {len(tokens)}")
+        return
+    if len(tokens) not in (8, 10):
+        rec.bad(n, f"ODOM has 10 fields (ODOM x y theta tv rv accel timestamp host logger_timestamp); "
+                   f"got {len(tokens)}")
+        return
+    v = rec.skips.floats(tokens[1:8], n, "ODOM", rec.on_error)
+    if v is None:
+        return
+    rec.odom.append((rec.record, v[6], v[:3]))
+    rec.record += 1
+
+
+def _take_param(rec: _Records, n: int, tokens: list[str]) -> None:
+    if len(tokens) < 3:
+        rec.bad(n, f"PARAM is 'PARAM name value ...'; got {len(tokens)} field(s)")
+        return
+    rec.params[tokens[1]] = tokens[2]
+
+
+def _take_neff(rec: _Records, n: int, tokens: list[str]) -> None:
+    if len(tokens) not in (2, 5):
+        rec.bad(n, f"NEFF is 'NEFF value [timestamp host logger_timestamp]' (2 or 5 fields); got {len(tokens)}")
+        return
+    v = rec.skips.floats(tokens[1:2], n, "NEFF", rec.on_error)
+    if v is None:
+        return
+    rec.neff.append((rec.record, float(v[0])))
+
+
+_TAKE = {"FLASER": _take_flaser, "ROBOTLASER1": _take_robotlaser, "ODOM": _take_odom, "PARAM": _take_param,
+         "NEFF": _take_neff}
+
+
+def _read_records(path: PathLike, on_error: str) -> _Records:
+    rec = _Records(path=path, on_error=on_error, skips=SkipCounter(path))
+    for n, tokens in read_records(path):
+        kind = tokens[0]
+        take = _TAKE.get(kind)
+        if take is not None:
+            take(rec, n, tokens)
+        elif _KEYWORD.match(kind):
+            rec.skips.add(f"{kind} records ({'not used' if kind in KNOWN_SKIPPED else 'unknown record type'})", n)
+        else:
+            raise FormatError(path, n, f"expected a CARMEN record type such as FLASER, ROBOTLASER1, ODOM or "
+                                       f"PARAM at the start of the line; got {kind[:30]!r}")
+    return rec
+
+
+def _chosen_scans(rec: _Records, laser: str) -> tuple[str, list]:
+    """The scan records to use (``laser``, or FLASER if any, else ROBOTLASER1); the others counted as skipped."""
+    use = laser
+    if use == "auto":
+        use = "FLASER" if rec.scans["FLASER"] else "ROBOTLASER1"
+    other = "ROBOTLASER1" if use == "FLASER" else "FLASER"
+    for n, *_ in rec.scans[other]:
+        rec.skips.add(f"{other} records (not used: reading {use})", n)
+    chosen = rec.scans[use]
+    if not chosen:
+        what = "FLASER or ROBOTLASER1" if laser == "auto" else use
+        seen = "; ".join(f"{n} {k}" for k, n in rec.skips.counts.items())
+        raise FormatError(rec.path, None, f"no {what} scan records: nothing to localize with"
+                          + (f" (skipped: {seen})" if seen else "")
+                          + (" -- is this a CARMEN log?" if not rec.odom and not rec.params else ""))
+    return use, chosen
+
+
+def _max_range(max_range: float | None, file_max: float | None, params: dict[str, str], ranges: NDArray
+               ) -> tuple[float, str]:
+    """The maximum range and where it came from (given, the records, a PARAM, the saturation value, a default)."""
+    if max_range is not None:
+        return float(max_range), "given"
+    if file_max is not None and file_max > 0:
+        return file_max, "ROBOTLASER1 maximum_range field"
+    if "robot_front_laser_max" in params and _is_float(params["robot_front_laser_max"]):
+        return float(params["robot_front_laser_max"]), "PARAM robot_front_laser_max"
+    top = float(ranges.max())
+    count = int(np.count_nonzero(ranges == top))
+    if count >= max(2, int(0.001 * ranges.size)):
+        return top, f"largest reading, repeated {count} times (saturation)"
+    return max(81.83, top + 0.01), "default 81.83 m (SICK LMS; no saturation value found)"
+
+
+def _mounting(robot_pose: NDArray, laser_pose: NDArray, params: dict[str, str], meta: dict) -> NDArray:
+    """The laser's mounting pose: from the two pose triples when they are rigidly related, else the PARAM."""
+    off, spread = median_offset(robot_pose, laser_pose)
+    if spread < 0.01:
+        meta["sensor_offset_source"] = "laser poses seen from robot poses"
+        return off
+    off = np.zeros(3)
+    fo = params.get("robot_frontlaser_offset")
+    if fo is not None and _is_float(fo):
+        off[0] = float(fo)
+    meta["sensor_offset_source"] = ("PARAM robot_frontlaser_offset (laser and robot poses are not rigidly "
+                                    f"related: spread {spread:.2f} m)")
+    return off
+
+
+def _odometry(rec: _Records, use: str, scan_rec: NDArray, robot_pose: NDArray, same: bool,
+              reanchored: bool | None, meta: dict) -> tuple[NDArray, NDArray, NDArray]:
+    """The odometry of each scan (re-anchored ODOM chain of corrected logs, or the scan's own pose triple)."""
+    odom_rec = np.array([o[0] for o in rec.odom], dtype=int)
+    odom_t = np.array([o[1] for o in rec.odom], dtype=float)
+    odom_p = np.array([o[2] for o in rec.odom], dtype=float).reshape(-1, 3)
+    anchor_idx = np.searchsorted(odom_rec, scan_rec + 1)  # first ODOM after each scan
+    has_next = anchor_idx < len(odom_rec)
+    if reanchored is None:
+        reanchored = False
+        if same and has_next[:-1].any():
+            idx = anchor_idx[:-1][has_next[:-1]]
+            d = odom_p[idx] - robot_pose[:-1][has_next[:-1]]
+            d[:, 2] = wrap_angle(d[:, 2])
+            reanchored = bool(np.all(np.abs(d) < 1e-4, axis=1).mean() >= 0.9)
+    if reanchored:
+        meta["odometry"] = ("re-anchored ODOM chain: last ODOM before each scan seen from the ODOM anchor after "
+                            "the previous scan, accumulated from the first corrected pose")
+        return _reanchored_chain(robot_pose, scan_rec, odom_rec, odom_p, anchor_idx), odom_t, odom_p
+    meta["odometry"] = "FLASER odometry triple" if use == "FLASER" else "ROBOTLASER1 robot pose"
+    return robot_pose.copy(), odom_t, odom_p
+
+
+def _neff_per_scan(neff: list[tuple[int, float]], scan_rec: NDArray) -> NDArray[np.float64]:
+    """The NEFF value that follows each scan (NaN where none does)."""
+    nf = np.full(scan_rec.size, np.nan)
+    if neff:
+        nrec = np.array([r for r, _ in neff])
+        nval = np.array([v for _, v in neff])
+        k = np.searchsorted(scan_rec, nrec, side="right") - 1  # the scan each NEFF follows
+        ok = k >= 0
+        nf[k[ok]] = nval[ok]
+    return nf
 
 
 def read_carmen_log(
@@ -128,196 +340,34 @@ def read_carmen_log(
         raise ValueError(f"on_error must be 'raise' or 'skip'; got {on_error!r}")
     if laser not in ("auto", "FLASER", "ROBOTLASER1"):
         raise ValueError(f"laser must be 'auto', 'FLASER' or 'ROBOTLASER1'; got {laser!r}")
-    skips = SkipCounter(path)
-    params: dict[str, str] = {}
-    # per kind of scan: lists of (line, t, ranges, laser pose, robot pose, angles, max_range)
-    scans: dict[str, list] = {"FLASER": [], "ROBOTLASER1": []}
-    odom: list[tuple[int, float, NDArray]] = []  # (record index, t, pose)
-    neff: list[tuple[int, float]] = []  # (record index, value)
-    record = 0  # order of the records we keep (scans, ODOM, NEFF)
-    beams: dict[str, tuple[int, int]] = {}  # kind -> (n, first line)
-
-    def bad(n: int, msg: str) -> None:
-        skips.malformed(n, msg, on_error)
-
-    for n, tokens in read_records(path):
-        kind = tokens[0]
-        if kind == "FLASER":
-            try:
-                nb = int(tokens[1]) if len(tokens) > 1 else -1
-            except ValueError:
-                bad(n, f"FLASER field 2 is the number of readings; got {tokens[1]!r}")
-                continue
-            if nb < 2:
-                bad(n, f"FLASER needs a reading count >= 2 in field 2; got {tokens[1] if len(tokens) > 1 else 'nothing'}")
-                continue
-            if len(tokens) not in (nb + 9, nb + 11):
-                bad(n, f"FLASER with {nb} readings has {nb + 11} fields (FLASER n r1..r{nb} x y theta "
-                       f"odom_x odom_y odom_theta timestamp host logger_timestamp); got {len(tokens)}")
-                continue
-            if "FLASER" in beams and beams["FLASER"][0] != nb:
-                bad(n, f"expected {beams['FLASER'][0]} readings like the first FLASER (line {beams['FLASER'][1]}); "
-                       f"got {nb}")
-                continue
-            v = skips.floats(tokens[2:nb + 9], n, "FLASER", on_error)
-            if v is None:
-                continue
-            r = v[:nb]
-            if np.any(r < 0):
-                bad(n, f"FLASER reading {int(np.flatnonzero(r < 0)[0]) + 1} is negative; expected a range >= 0 m")
-                continue
-            beams.setdefault("FLASER", (nb, n))
-            scans["FLASER"].append((n, record, v[nb + 6], r, v[nb:nb + 3], v[nb + 3:nb + 6], None, None))
-            record += 1
-        elif kind == "ROBOTLASER1":
-            parsed = _parse_robotlaser(tokens, path, n)
-            if isinstance(parsed, str):
-                bad(n, parsed)
-                continue
-            nb = parsed[0].size
-            if "ROBOTLASER1" in beams and beams["ROBOTLASER1"][0] != nb:
-                bad(n, f"expected {beams['ROBOTLASER1'][0]} readings like the first ROBOTLASER1 "
-                       f"(line {beams['ROBOTLASER1'][1]}); got {nb}")
-                continue
-            beams.setdefault("ROBOTLASER1", (nb, n))
-            r, lp, rp, t, ang, mr = parsed
-            scans["ROBOTLASER1"].append((n, record, t, r, lp, rp, ang, mr))
-            record += 1
-        elif kind == "ODOM":
-            if len(tokens) < 8:
-                bad(n, f"ODOM is 'ODOM x y theta tv rv accel timestamp host logger_timestamp' (10 fields); "
-                       f"got {len(tokens)}")
-                continue
-            if len(tokens) not in (8, 10):
-                bad(n, f"ODOM has 10 fields (ODOM x y theta tv rv accel timestamp host logger_timestamp); "
-                       f"got {len(tokens)}")
-                continue
-            v = skips.floats(tokens[1:8], n, "ODOM", on_error)
-            if v is None:
-                continue
-            odom.append((record, v[6], v[:3]))
-            record += 1
-        elif kind == "PARAM":
-            if len(tokens) < 3:
-                bad(n, f"PARAM is 'PARAM name value ...'; got {len(tokens)} field(s)")
-                continue
-            params[tokens[1]] = tokens[2]
-        elif kind == "NEFF":
-            if len(tokens) not in (2, 5):
-                bad(n, f"NEFF is 'NEFF value [timestamp host logger_timestamp]' (2 or 5 fields); got {len(tokens)}")
-                continue
-            v = skips.floats(tokens[1:2], n, "NEFF", on_error)
-            if v is None:
-                continue
-            neff.append((record, float(v[0])))
-        elif _KEYWORD.match(kind):
-            if kind in KNOWN_SKIPPED:
-                skips.add(f"{kind} records (not used)", n)
-            else:
-                skips.add(f"{kind} records (unknown record type)", n)
-        else:
-            raise FormatError(path, n, f"expected a CARMEN record type such as FLASER, ROBOTLASER1, ODOM or "
-                                       f"PARAM at the start of the line; got {kind[:30]!r}")
-
-    use = laser
-    if use == "auto":
-        use = "FLASER" if scans["FLASER"] else "ROBOTLASER1"
-    other = "ROBOTLASER1" if use == "FLASER" else "FLASER"
-    for n, *_ in scans[other]:
-        skips.add(f"{other} records (not used: reading {use})", n)
-    chosen = scans[use]
-    if not chosen:
-        what = "FLASER or ROBOTLASER1" if laser == "auto" else use
-        seen = "; ".join(f"{n} {k}" for k, n in skips.counts.items())
-        raise FormatError(path, None, f"no {what} scan records: nothing to localize with"
-                          + (f" (skipped: {seen})" if seen else "")
-                          + (" -- is this a CARMEN log?" if not odom and not params else ""))
-    skips.warn()
-
+    rec = _read_records(path, on_error)
+    use, chosen = _chosen_scans(rec, laser)
+    rec.skips.warn()
     lines = np.array([c[0] for c in chosen])
-    rec = np.array([c[1] for c in chosen])
+    scan_rec = np.array([c[1] for c in chosen])
     times = np.array([c[2] for c in chosen])
     ranges = np.array([c[3] for c in chosen])
     laser_pose = np.array([c[4] for c in chosen])
     robot_pose = np.array([c[5] for c in chosen])
     meta: dict = {"scan_records": use, "first_scan_line": int(lines[0])}
-
-    # ---- beam angles and maximum range
     if use == "FLASER":
-        angles = carmen_angles(ranges.shape[1])
-        file_max = None
+        angles, file_max = carmen_angles(ranges.shape[1]), None
     else:
-        angles = chosen[0][6]
-        file_max = float(np.median([c[7] for c in chosen]))
-    if max_range is not None:
-        mr, src = float(max_range), "given"
-    elif file_max is not None and file_max > 0:
-        mr, src = file_max, "ROBOTLASER1 maximum_range field"
-    elif "robot_front_laser_max" in params and _is_float(params["robot_front_laser_max"]):
-        mr, src = float(params["robot_front_laser_max"]), "PARAM robot_front_laser_max"
-    else:
-        top = float(ranges.max())
-        count = int(np.count_nonzero(ranges == top))
-        if count >= max(2, int(0.001 * ranges.size)):
-            mr, src = top, f"largest reading, repeated {count} times (saturation)"
-        else:
-            mr, src = max(81.83, top + 0.01), "default 81.83 m (SICK LMS; no saturation value found)"
-    meta["max_range_source"] = src
-
-    # ---- sensor offset and reference poses
+        angles, file_max = chosen[0][6], float(np.median([c[7] for c in chosen]))
+    mr, meta["max_range_source"] = _max_range(max_range, file_max, rec.params, ranges)
     same = np.allclose(laser_pose, robot_pose, atol=1e-6)
-    off, spread = median_offset(robot_pose, laser_pose)
-    if spread < 0.01:
-        meta["sensor_offset_source"] = "laser poses seen from robot poses"
-    else:
-        off = np.zeros(3)
-        fo = params.get("robot_frontlaser_offset")
-        if fo is not None and _is_float(fo):
-            off[0] = float(fo)
-        meta["sensor_offset_source"] = ("PARAM robot_frontlaser_offset (laser and robot poses are not rigidly "
-                                        f"related: spread {spread:.2f} m)")
+    off = _mounting(robot_pose, laser_pose, rec.params, meta)
     poses = robot_pose.copy() if same else None
     meta["poses"] = "corrected (both pose triples agree)" if same else "none (pose triples differ: raw log)"
-
-    # ---- odometry
-    odom_rec = np.array([o[0] for o in odom], dtype=int)
-    odom_t = np.array([o[1] for o in odom], dtype=float)
-    odom_p = np.array([o[2] for o in odom], dtype=float).reshape(-1, 3)
-    anchor_idx = np.searchsorted(odom_rec, rec + 1)  # first ODOM after each scan
-    has_next = anchor_idx < len(odom_rec)
-    if reanchored is None:
-        if same and has_next[:-1].any():
-            idx = anchor_idx[:-1][has_next[:-1]]
-            d = odom_p[idx] - robot_pose[:-1][has_next[:-1]]
-            d[:, 2] = wrap_angle(d[:, 2])
-            ok = np.all(np.abs(d) < 1e-4, axis=1)
-            reanchored = bool(ok.mean() >= 0.9)
-        else:
-            reanchored = False
-    if reanchored:
-        odometry = _reanchored_chain(robot_pose, rec, odom_rec, odom_p, anchor_idx)
-        meta["odometry"] = ("re-anchored ODOM chain: last ODOM before each scan seen from the ODOM anchor after "
-                            "the previous scan, accumulated from the first corrected pose")
-    else:
-        odometry = robot_pose.copy()
-        meta["odometry"] = "FLASER odometry triple" if use == "FLASER" else "ROBOTLASER1 robot pose"
-
-    nf = np.full(len(chosen), np.nan)
-    if neff:
-        nrec = np.array([r for r, _ in neff])
-        nval = np.array([v for _, v in neff])
-        k = np.searchsorted(rec, nrec, side="right") - 1  # the scan each NEFF follows
-        ok = k >= 0
-        nf[k[ok]] = nval[ok]
-    meta["neff"] = nf
+    odometry, odom_t, odom_p = _odometry(rec, use, scan_rec, robot_pose, same, reanchored, meta)
+    meta["neff"] = _neff_per_scan(rec.neff, scan_rec)
     meta["scan_lines"] = lines
-    dt = np.diff(times)
-    meta["timestamps_monotonic"] = bool(np.all(dt >= 0))
+    meta["timestamps_monotonic"] = bool(np.all(np.diff(times) >= 0))
     meta["timestamps_distinct"] = float(np.unique(times).size / times.size)
     return LaserLog(
         times=times, odometry=odometry, ranges=ranges, angles=angles, max_range=mr, sensor_offset=off,
         poses=poses, odom_times=odom_t, odom_poses=odom_p, source=str(path), format="carmen",
-        params=params, skipped=skips.as_dict(), meta=meta,
+        params=rec.params, skipped=rec.skips.as_dict(), meta=meta,
     )
 
 

@@ -116,27 +116,37 @@ def read_cmu_map(path: PathLike) -> OccupancyGrid:
     array([[ 0.,  0., nan],
            [ 1.,  0.,  0.]])
     """
-    header: dict[str, tuple[float, int]] = {}
-    size_line = None
-    size_x = size_y = None
-    rows: list[NDArray[np.float64]] = []
-    row_lines: list[int] = []
     lines = read_lines(path)
+    header, size_y, size_x, size_line = _cmu_header(path, lines)
+    res_cm = _checked_resolution(path, header, size_x, size_y, size_line)
+    p_free = np.array(_cmu_rows(path, lines, size_x, size_y, size_line))  # [x, y]
+    occ = np.where(p_free < 0, np.nan, 1.0 - p_free)
+    return OccupancyGrid(occ.T, res_cm / 100.0, origin=(0.0, 0.0))
+
+
+def _cmu_header_line(path: PathLike, n: int, line: str) -> tuple[str, float]:
+    parts = line[len(_HEADER_PREFIX):].split()
+    if len(parts) != 2:
+        raise FormatError(path, n, f"a header line is '{_HEADER_PREFIX}name value'; got {line!r}")
+    try:
+        val = float(parts[1])
+    except ValueError:
+        raise FormatError(path, n, f"header {parts[0]} must be a number; got {parts[1]!r}") from None
+    if not np.isfinite(val):
+        raise FormatError(path, n, f"header {parts[0]} must be finite; got {parts[1]!r}")
+    return parts[0], val
+
+
+def _cmu_header(path: PathLike, lines) -> tuple[dict[str, tuple[float, int]], int, int, int]:
+    """The header lines up to ``global_map[0]: size_y size_x``: ``({name: (value, line)}, size_y, size_x, line)``."""
+    header: dict[str, tuple[float, int]] = {}
     for n, raw in lines:
         line = raw.strip()
         if not line:
             continue
         if line.startswith(_HEADER_PREFIX):
-            parts = line[len(_HEADER_PREFIX):].split()
-            if len(parts) != 2:
-                raise FormatError(path, n, f"a header line is '{_HEADER_PREFIX}name value'; got {line!r}")
-            try:
-                val = float(parts[1])
-            except ValueError:
-                raise FormatError(path, n, f"header {parts[0]} must be a number; got {parts[1]!r}") from None
-            if not np.isfinite(val):
-                raise FormatError(path, n, f"header {parts[0]} must be finite; got {parts[1]!r}")
-            header[parts[0]] = (val, n)
+            name, val = _cmu_header_line(path, n, line)
+            header[name] = (val, n)
             continue
         if line.startswith("global_map[0]:"):
             parts = line[len("global_map[0]:"):].split()
@@ -146,13 +156,15 @@ def read_cmu_map(path: PathLike) -> OccupancyGrid:
                 raise FormatError(path, n, f"expected 'global_map[0]: size_y size_x' with two integers; got {line!r}") from None
             if size_x <= 0 or size_y <= 0:
                 raise FormatError(path, n, f"map sizes must be positive; got {size_y} {size_x}")
-            size_line = n
-            break
+            return header, size_y, size_x, n
         raise FormatError(path, n, f"expected a '{_HEADER_PREFIX}...' header line or 'global_map[0]: size_y size_x'; "
                                    f"got {line[:60]!r}")
-    if size_line is None:
-        raise FormatError(path, None, "no 'global_map[0]: size_y size_x' line: this is not a CMU/BeeSoft map")
-    assert size_x is not None and size_y is not None
+    raise FormatError(path, None, "no 'global_map[0]: size_y size_x' line: this is not a CMU/BeeSoft map")
+
+
+def _checked_resolution(path: PathLike, header: dict[str, tuple[float, int]], size_x: int, size_y: int,
+                        size_line: int) -> float:
+    """The resolution (cm per cell), checked with the map sizes the header states; autoshifts warned about."""
     res_cm = header.get("resolution", (10.0, 0))[0]
     if res_cm <= 0:
         raise FormatError(path, header["resolution"][1], f"resolution must be positive (cm per cell); got {res_cm:g}")
@@ -168,7 +180,13 @@ def read_cmu_map(path: PathLike) -> OccupancyGrid:
     for key in ("autoshifted_x", "autoshifted_y"):
         if key in header and header[key][0] != 0:
             warnings.warn(f"{path}:{header[key][1]}: {key} = {header[key][0]:g} is ignored (the map origin is "
-                          "placed at (0, 0) as in the course's loader)", ParseWarning, stacklevel=2)
+                          "placed at (0, 0) as in the course's loader)", ParseWarning, stacklevel=3)
+    return res_cm
+
+
+def _cmu_rows(path: PathLike, lines, size_x: int, size_y: int, size_line: int) -> list[NDArray[np.float64]]:
+    """The ``size_x`` lines of ``size_y`` probabilities of free space (-1 unknown) after the header."""
+    rows: list[NDArray[np.float64]] = []
     for n, raw in lines:
         line = raw.strip()
         if not line:
@@ -187,13 +205,10 @@ def read_cmu_map(path: PathLike) -> OccupancyGrid:
             raise FormatError(path, n, f"value {k + 1} is {tokens[k]}, expected a probability of free space in "
                                        "[0, 1] or -1 for unknown")
         rows.append(vals)
-        row_lines.append(n)
     if len(rows) != size_x:
         raise FormatError(path, None, f"the header (line {size_line}) declares {size_x} lines of values "
                                       f"(one per x cell); the file ends after {len(rows)}")
-    p_free = np.array(rows)  # [x, y]
-    occ = np.where(p_free < 0, np.nan, 1.0 - p_free)
-    return OccupancyGrid(occ.T, res_cm / 100.0, origin=(0.0, 0.0))
+    return rows
 
 
 def write_cmu_map(path: PathLike, grid: OccupancyGrid, decimals: int = 6) -> Path:

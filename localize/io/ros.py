@@ -36,6 +36,7 @@ obstacle.
 
 from __future__ import annotations
 
+import io as _io
 import os
 import re
 import warnings
@@ -47,6 +48,7 @@ from numpy.typing import NDArray
 from .._checks import check_grid
 from ..grid import OccupancyGrid
 from ._common import FormatError, ParseWarning
+from ._yaml import load_yaml_mapping
 
 __all__ = ["read_ros_map", "write_ros_map", "read_pgm", "write_pgm", "parse_map_yaml", "image_to_occupancy"]
 
@@ -58,11 +60,66 @@ _MAX_GREY_16 = 65535
 
 
 # ----------------------------------------------------------------------------- PGM
+def _pgm_header(p: Path, buf: bytes) -> tuple[bytes, int, int, int, int]:
+    """Magic, width, height, maxval and the offset after the header, checked with the line of a bad field."""
+    magic = buf[:2]
+    if magic not in (b"P5", b"P2"):
+        raise FormatError(p, 1, f"expected a PGM image starting with 'P5' (binary) or 'P2' (plain); got {magic!r}")
+    pos, fields = 2, []  # width, height, maxval separated by whitespace; '#' comments to end of line
+    for tok in re.finditer(rb"\s*(?:#[^\n\r]*[\n\r]?\s*)*([^\s#]*)", buf[2:]):
+        start, pos = 2 + tok.start(1), 2 + tok.end(1)
+        if start == pos:
+            raise FormatError(p, buf[:pos].count(b"\n") + 1,
+                              "the PGM header ends early: expected width, height and maxval")
+        if not tok.group(1).isdigit():
+            raise FormatError(p, buf[:start].count(b"\n") + 1,
+                              f"PGM header field {len(fields) + 2} must be a positive integer; got {tok.group(1)[:20]!r}")
+        fields.append(int(tok.group(1)))
+        if len(fields) == 3:
+            break
+    w, h, maxval = fields
+    if w <= 0 or h <= 0 or not 0 < maxval <= _MAX_GREY_16:
+        raise FormatError(p, None, f"PGM header: width {w}, height {h}, maxval {maxval}; need width, height >= 1 and "
+                                   f"1 <= maxval <= {_MAX_GREY_16}")
+    return magic, w, h, maxval, pos
+
+
+def _check_binary_raster(p: Path, buf: bytes, w: int, h: int, maxval: int, pos: int) -> None:
+    """A P5 raster's size and values against its header (Pillow ignores extra bytes and clips large values)."""
+    pos += 1  # exactly one whitespace byte before the raster
+    dtype = np.dtype(">u2") if maxval > 255 else np.dtype(np.uint8)
+    need = w * h * dtype.itemsize
+    raster = buf[pos:pos + need]
+    if len(raster) < need:
+        raise FormatError(p, None, f"the header says {w} x {h} pixels ({need} bytes), but the file holds only "
+                                   f"{len(raster)} bytes of pixel data (truncated?)")
+    if len(buf) - pos > need + 1 and buf[pos + need:].strip():
+        raise FormatError(p, None, f"the header says {w} x {h} pixels, but {len(buf) - pos - need} bytes follow "
+                                   "the pixel data (header and data disagree)")
+    top = int(np.frombuffer(raster, dtype=dtype).max(initial=0))
+    if top > maxval:
+        raise FormatError(p, None, f"a pixel value {top} exceeds the header's maxval {maxval}")
+
+
+def _plain_count_error(p: Path, buf: bytes, w: int, h: int, pos: int) -> FormatError | None:
+    toks = re.sub(rb"#[^\n]*", b"", buf[pos:]).split()
+    if len(toks) != w * h:
+        return FormatError(p, None, f"the header says {w} x {h} = {w * h} pixels; the file holds {len(toks)} values")
+    return None
+
+
 def read_pgm(path: PathLike) -> NDArray:
-    """Read a binary (P5) or plain (P2) PGM image into a 2-D integer array (first row = top).
+    """Read a binary (P5) or plain (P2) PGM image into a 2-D array, first row = top, scaled by its maxval.
+
+    Pillow decodes the pixels and scales them by the header's own maximum value
+    to the full range of the result: ``uint8`` (0-255) for a maxval up to 255,
+    ``uint16`` (0-65535) above it -- as ``map_server`` does (ROS 1 through
+    SDL_image, nav2 through GraphicsMagick), so that a map written with maxval
+    100 reads its 100 as white, not as grey. Pillow rounds ``v * 255 / maxval``
+    to whole numbers: a value's occupancy moves by at most 0.5/255.
 
     Raises :class:`FormatError` for a bad magic number, a malformed header, or
-    pixel data that disagrees with the header's size.
+    pixel data that disagrees with the header's size or maxval.
 
     Examples
     --------
@@ -71,6 +128,9 @@ def read_pgm(path: PathLike) -> NDArray:
     >>> read_pgm(p)
     array([[  0, 128, 255],
            [254, 205,   1]], dtype=uint8)
+    >>> _ = p.write_bytes(b"P2\\n3 1\\n100\\n100 0 80\\n")   # maxval 100: 100 is white
+    >>> read_pgm(p)
+    array([[255,   0, 204]], dtype=uint8)
     """
     p = Path(path)
     if not p.is_file():
@@ -78,58 +138,24 @@ def read_pgm(path: PathLike) -> NDArray:
     buf = p.read_bytes()
     if not buf:
         raise FormatError(p, None, "the file is empty")
-    magic = buf[:2]
-    if magic not in (b"P5", b"P2"):
-        raise FormatError(p, 1, f"expected a PGM image starting with 'P5' (binary) or 'P2' (plain); got {magic!r}")
-    # header: magic, width, height, maxval separated by whitespace; '#' comments to end of line
-    pos, fields = 2, []
-    while len(fields) < 3:
-        while pos < len(buf) and buf[pos:pos + 1].isspace():
-            pos += 1
-        if pos < len(buf) and buf[pos:pos + 1] == b"#":
-            while pos < len(buf) and buf[pos:pos + 1] not in (b"\n", b"\r"):
-                pos += 1
-            continue
-        start = pos
-        while pos < len(buf) and not buf[pos:pos + 1].isspace() and buf[pos:pos + 1] != b"#":
-            pos += 1
-        if start == pos:
-            line = buf[:pos].count(b"\n") + 1
-            raise FormatError(p, line, "the PGM header ends early: expected width, height and maxval")
-        tok = buf[start:pos]
-        if not tok.isdigit():
-            line = buf[:start].count(b"\n") + 1
-            raise FormatError(p, line, f"PGM header field {len(fields) + 2} must be a positive integer; got {tok[:20]!r}")
-        fields.append(int(tok))
-    w, h, maxval = fields
-    if w <= 0 or h <= 0 or not 0 < maxval <= _MAX_GREY_16:
-        raise FormatError(p, None, f"PGM header: width {w}, height {h}, maxval {maxval}; need width, height >= 1 and "
-                                   f"1 <= maxval <= {_MAX_GREY_16}")
+    magic, w, h, maxval, pos = _pgm_header(p, buf)
     if magic == b"P5":
-        pos += 1  # exactly one whitespace byte before the raster
-        dtype = np.dtype(">u2") if maxval > 255 else np.dtype(np.uint8)
-        need = w * h * dtype.itemsize
-        raster = buf[pos:pos + need]
-        if len(raster) < need:
-            raise FormatError(p, None, f"the header says {w} x {h} pixels ({need} bytes), but the file holds only "
-                                       f"{len(raster)} bytes of pixel data (truncated?)")
-        if len(buf) - pos > need + 1 and buf[pos + need:].strip():
-            raise FormatError(p, None, f"the header says {w} x {h} pixels, but {len(buf) - pos - need} bytes follow "
-                                       "the pixel data (header and data disagree)")
-        img = np.frombuffer(raster, dtype=dtype).reshape(h, w)
-        img = img.astype(np.uint16 if maxval > 255 else np.uint8)
-    else:
-        toks = re.sub(rb"#[^\n]*", b"", buf[pos:]).split()
-        if len(toks) != w * h:
-            raise FormatError(p, None, f"the header says {w} x {h} = {w * h} pixels; the file holds {len(toks)} values")
-        try:
-            img = np.array([int(t) for t in toks], dtype=np.int64).reshape(h, w)
-        except ValueError:
-            raise FormatError(p, None, "plain PGM pixel values must be integers") from None
-        img = img.astype(np.uint16 if maxval > 255 else np.uint8)
-    if img.max(initial=0) > maxval:
-        raise FormatError(p, None, f"a pixel value {int(img.max())} exceeds the header's maxval {maxval}")
-    return img
+        _check_binary_raster(p, buf, w, h, maxval, pos)
+    elif (count := _plain_count_error(p, buf, w, h, pos)) is not None:
+        raise count
+    from PIL import Image
+
+    try:
+        with Image.open(_io.BytesIO(buf), formats=["PPM"]) as im:
+            im.load()
+            img = np.asarray(im)
+    except (ValueError, OSError, SyntaxError) as exc:  # plain PGM: a value above maxval, or not a number
+        text = str(exc)
+        big = re.search(r"too large for this mode: (\d+)", text)
+        if big:
+            raise FormatError(p, None, f"a pixel value {big.group(1)} exceeds the header's maxval {maxval}") from None
+        raise FormatError(p, None, f"plain PGM pixel values must be integers from 0 to maxval ({text})") from None
+    return img.astype(np.uint16 if maxval > 255 else np.uint8)
 
 
 def write_pgm(path: PathLike, image: NDArray) -> Path:
@@ -151,28 +177,12 @@ def write_pgm(path: PathLike, image: NDArray) -> Path:
 
 
 # ----------------------------------------------------------------------------- YAML
-def _scalar(text: str):
-    t = text.strip()
-    if len(t) >= 2 and t[0] == t[-1] and t[0] in "'\"":
-        return t[1:-1]
-    if t.startswith("[") and t.endswith("]"):
-        inner = t[1:-1].strip()
-        return [_scalar(x) for x in inner.split(",")] if inner else []
-    try:
-        return int(t)
-    except ValueError:
-        pass
-    try:
-        return float(t)
-    except ValueError:
-        return t
-
-
 def parse_map_yaml(path: PathLike) -> dict:
-    """Parse the flat ``key: value`` YAML of a ``map_server`` map; values keep their line numbers.
+    """Parse the flat ``key: value`` YAML of a ``map_server`` map (PyYAML); values keep their line numbers.
 
-    Only what map files use is supported: one ``key: value`` per line, numbers,
-    strings, ``[a, b, c]`` lists and ``#`` comments. Returns ``{key: (value, line)}``.
+    Returns ``{key: (value, line)}``. A nested value, a key given twice or a
+    YAML syntax error is a :class:`FormatError` naming the line. Numbers
+    written as ``1e-2`` are numbers (as for ``map_server``'s yaml-cpp).
 
     Examples
     --------
@@ -187,21 +197,7 @@ def parse_map_yaml(path: PathLike) -> dict:
     text = p.read_text(errors="replace")
     if not text.strip():
         raise FormatError(p, None, "the file is empty; expected a map_server YAML (image, resolution, origin, ...)")
-    out: dict = {}
-    for n, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].rstrip() if not re.search(r"['\"].*#.*['\"]", raw) else raw.rstrip()
-        if not line.strip() or line.strip() == "---":
-            continue
-        if line[0].isspace() or ":" not in line:
-            raise FormatError(p, n, f"expected 'key: value' (a flat map_server YAML); got {raw.strip()[:60]!r}")
-        key, _, value = line.partition(":")
-        key = key.strip()
-        if not value.strip():
-            raise FormatError(p, n, f"key {key!r} has no value; nested YAML is not a map_server map description")
-        if key in out:
-            raise FormatError(p, n, f"key {key!r} appears twice (first on line {out[key][1]})")
-        out[key] = (_scalar(value), n)
-    return out
+    return load_yaml_mapping(p, text, "a map_server map description")
 
 
 # ----------------------------------------------------------------------------- conversion

@@ -42,8 +42,10 @@ the estimate can be replayed beside the data.
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -313,6 +315,224 @@ def read_rosbag(
         reader.close()
 
 
+@dataclass
+class _Messages:
+    """What one pass over the bag collects: the scans, the odometry samples and the transforms."""
+
+    scan_topic: str
+    odom_topics: list[str]
+    root: Path
+    stamps: list[int] = field(default_factory=list)
+    rec: list[int] = field(default_factory=list)
+    ranges: list[NDArray] = field(default_factory=list)
+    layout: tuple | None = None
+    frame: str = ""
+    odo: list[tuple[int, float, float, float, str, str]] = field(default_factory=list)
+    dyn: dict[tuple[str, str], list[tuple[int, NDArray]]] = field(default_factory=dict)
+    static: dict[tuple[str, str], NDArray] = field(default_factory=dict)
+    tf_count: dict[str, int] = field(default_factory=dict)
+
+
+#: (field, value) pairs of a LaserScan's layout, in the order of the layout tuple.
+_LAYOUT_FIELDS = ("beams", "angle_min", "angle_increment", "range_min", "range_max")
+
+
+def _layout_problem(msg: Any, n: int) -> str | None:
+    """What makes a LaserScan's layout impossible (a field and why), or None."""
+    a_min, a_max, inc = float(msg.angle_min), float(msg.angle_max), float(msg.angle_increment)
+    r_min, r_max = float(msg.range_min), float(msg.range_max)
+    for name, v in (("angle_min", a_min), ("angle_max", a_max), ("angle_increment", inc), ("range_min", r_min),
+                    ("range_max", r_max)):
+        if not np.isfinite(v):
+            return f"{name} is {v}; expected a finite number"
+    if not r_max > 0:
+        return f"range_max is {r_max}; expected a positive number of metres"
+    if r_min > r_max:
+        return f"range_min ({r_min:g} m) is above range_max ({r_max:g} m): no reading could be valid"
+    if n > 1 and inc == 0:
+        return f"angle_increment is 0 with {n} beams: every beam would point at angle_min"
+    # the last beam ends at angle_max; drivers that count one beam more or less are accepted
+    if n > 1 and abs((a_max - a_min) / inc - (n - 1)) > 1.0 + 1e-3:
+        return (f"angle_increment does not fit angle_min, angle_max and the {n} beams: angle_min {a_min:g} + "
+                f"{n - 1} x angle_increment {inc:g} = {a_min + (n - 1) * inc:g} rad, but angle_max is {a_max:g} rad")
+    return None
+
+
+def _take_scan(m: _Messages, msg: Any, rec_time: int) -> None:
+    n = len(msg.ranges)
+    lay = (n, float(msg.angle_min), float(msg.angle_increment), float(msg.range_min), float(msg.range_max))
+    k = len(m.stamps)
+    if lay != m.layout:  # the first scan, or one that changed: is it a possible layout?
+        problem = _layout_problem(msg, n)
+        if problem is not None:
+            raise FormatError(m.root, None, f"{m.scan_topic}: scan {k} (stamp {_stamp(msg.header) / _NS_PER_S:.9f} s):"
+                                            f" {problem}")
+    if m.layout is None:
+        m.layout, m.frame = lay, msg.header.frame_id
+        if n == 0:
+            raise FormatError(m.root, None, f"{m.scan_topic}: the first scan has no ranges")
+    elif lay != m.layout:
+        changed = ", ".join(f"{f} {a!r} (scan 0: {b!r})" for f, a, b in zip(_LAYOUT_FIELDS, lay, m.layout) if a != b)
+        raise FormatError(m.root, None, f"{m.scan_topic}: scan {k} has another layout than scan 0: {changed}; "
+                                        "expected one laser with a fixed layout")
+    m.stamps.append(_stamp(msg.header))
+    m.rec.append(int(rec_time))
+    m.ranges.append(np.asarray(msg.ranges, dtype=np.float32))
+
+
+def _unit_quaternion(q: Any, where: str) -> list[float]:
+    """``(x, y, z, w)`` scaled to unit length (tf2 does the same); a zero or NaN one is an error naming ``where``."""
+    v = [float(q.x), float(q.y), float(q.z), float(q.w)]
+    n = math.sqrt(sum(c * c for c in v))
+    if not math.isfinite(n) or n < 1e-9:
+        raise ValueError(f"{where}: the orientation quaternion (x, y, z, w) = ({', '.join(f'{c:g}' for c in v)}) "
+                         "has no direction (zero or not a number); expected a unit quaternion")
+    return v if abs(n - 1.0) <= 1e-9 else [c / n for c in v]
+
+
+def _take_odom(m: _Messages, msg: Any) -> None:
+    p = msg.pose.pose
+    where = f"{m.odom_topics[0]}: message {len(m.odo)} (stamp {_stamp(msg.header) / _NS_PER_S:.9f} s)"
+    try:
+        q = _unit_quaternion(p.orientation, where)
+    except ValueError as exc:
+        raise FormatError(m.root, None, str(exc)) from None
+    m.odo.append((_stamp(msg.header), float(p.position.x), float(p.position.y), float(quaternion_to_yaw(q)),
+                  msg.header.frame_id, msg.child_frame_id))
+
+
+def _take_tf(m: _Messages, topic: str, msg: Any) -> None:
+    k = m.tf_count[topic] = m.tf_count.get(topic, -1) + 1
+    for tr in msg.transforms:
+        t, r = tr.transform.translation, tr.transform.rotation
+        key = (tr.header.frame_id.lstrip("/"), tr.child_frame_id.lstrip("/"))
+        try:
+            mat = _matrix([t.x, t.y, t.z], _unit_quaternion(r, f"{topic}: message {k}, transform {key[0]} -> "
+                                                               f"{key[1]}"))
+        except ValueError as exc:
+            raise FormatError(m.root, None, str(exc)) from None
+        if topic.endswith("tf_static"):
+            m.static[key] = mat
+        else:
+            m.dyn.setdefault(key, []).append((_stamp(tr.header), mat))
+
+
+def _collect(root: Path, reader, conns, scan_t: str, odom_t: list[str]) -> _Messages:
+    m = _Messages(scan_topic=scan_t, odom_topics=odom_t, root=root)
+    for conn, rec_time, raw in reader.messages(connections=conns):
+        msg = reader.deserialize(raw, conn.msgtype)
+        if conn.topic == scan_t:
+            _take_scan(m, msg, rec_time)
+        elif conn.topic in odom_t:
+            _take_odom(m, msg)
+        else:
+            _take_tf(m, conn.topic, msg)
+    if not m.stamps:
+        raise FormatError(root, None, f"{scan_t} holds no messages")
+    return m
+
+
+def _odometry_topic(m: _Messages, meta: dict) -> tuple[NDArray, NDArray, str, str]:
+    topic = m.odom_topics[0]
+    o_st = np.array([o[0] for o in m.odo], dtype=np.int64)
+    if o_st.size == 0:
+        raise FormatError(m.root, None, f"scans without odometry: {topic} holds no messages")
+    _check_time(m.root, topic, o_st)
+    o_pose = np.array([o[1:4] for o in m.odo], dtype=float)
+    parent, base = m.odo[0][4].lstrip("/") or "odom", m.odo[0][5].lstrip("/") or "base_link"
+    meta["odometry"] = f"nav_msgs/Odometry on {topic} ({parent} -> {base})"
+    meta["odom_topic"] = topic
+    return o_st, o_pose, parent, base
+
+
+def _odometry_tf(m: _Messages, meta: dict, topics: dict[str, str], odom_frame: str | None, frame: str
+                 ) -> tuple[NDArray, NDArray, str, str]:
+    pairs = sorted(m.dyn)
+    if not pairs:
+        raise FormatError(m.root, None, f"scans without odometry: the bag has no {ODOM_TYPE} topic and no "
+                                        f"transforms on /tf; {_topic_list(topics)}")
+    if odom_frame is not None:
+        cands = [p for p in pairs if p[0] == odom_frame]
+    else:
+        cands = [p for p in pairs if p[0] == "odom"] or [p for p in pairs if p[0] not in _GLOBAL_FRAMES]
+    if len(cands) > 1:  # keep the one whose child reaches the laser through static transforms
+        linked = [p for p in cands if _tf_graph_pose(m.static, p[1], frame) is not None]
+        cands = linked if linked else cands
+    if len(cands) != 1:
+        listed = ", ".join(f"{a} -> {b}" for a, b in pairs)
+        raise FormatError(m.root, None, f"scans without odometry: cannot tell the odometry transform on /tf "
+                                        f"(transforms there: {listed}); expected one odom -> base transform, or a "
+                                        f"{ODOM_TYPE} topic (--odom-topic)")
+    parent, base = cands[0]
+    seq = m.dyn[cands[0]]
+    o_st = np.array([s for s, _ in seq], dtype=np.int64)
+    _check_time(m.root, f"/tf ({parent} -> {base})", o_st)
+    o_pose = np.array([[t[0, 3], t[1, 3], np.arctan2(t[1, 0], t[0, 0])] for _, t in seq])
+    meta["odometry"] = f"/tf transform {parent} -> {base}"
+    return o_st, o_pose, parent, base
+
+
+def _laser_mounting(m: _Messages, meta: dict, laser_pose, parent: str, base: str, frame: str
+                    ) -> tuple[NDArray, bool]:
+    """The laser's pose in the base frame (x, y, yaw) and whether it is mounted upside down."""
+    if laser_pose is not None:
+        off = np.asarray(laser_pose, dtype=float).reshape(-1)
+        if off.shape != (3,) or not np.all(np.isfinite(off)):
+            raise ValueError(f"laser_pose must be three finite numbers (x, y, yaw); got {laser_pose!r}")
+        meta["sensor_offset_source"] = "given (laser_pose / --laser-pose)"
+        return off, False
+    edges = dict(m.static)
+    for key, seq in m.dyn.items():  # constant transforms on /tf count as static
+        if key != (parent, base) and all(np.allclose(t, seq[0][1], atol=1e-9) for _, t in seq):
+            edges.setdefault(key, seq[0][1])
+    t = _tf_graph_pose(edges, base, frame)
+    if t is None:
+        known = sorted({f for k in m.static for f in k})
+        raise FormatError(m.root, None, f"no transform from the base frame '{base}' to the laser frame '{frame}' "
+                                        f"on /tf_static (frames there: {', '.join(known) or 'none'}); give the "
+                                        "laser's mounting pose with --laser-pose X Y YAW (metres, radians; "
+                                        "0 0 0 if the laser sits at the robot's centre)")
+    off = np.array([t[0, 3], t[1, 3], np.arctan2(t[1, 0], t[0, 0])])
+    flip = bool(t[2, 2] < 0)
+    if abs(t[2, 2]) < np.cos(np.radians(5.0)):
+        meta["sensor_tilt_warning"] = f"the laser is tilted {np.degrees(np.arccos(abs(t[2, 2]))):.1f} degrees"
+    meta["sensor_offset_source"] = f"/tf_static chain {base} -> {frame}" + (" (mounted upside down)" if flip else "")
+    return off, flip
+
+
+def _scan_arrays(m: _Messages) -> tuple[NDArray, NDArray, NDArray, float, float]:
+    """Beam angles, ranges (no return = range_max), the invalid-reading mask, range_max and range_min."""
+    n_beams, a_min, a_inc, r_min, r_max = m.layout
+    deg = np.pi / 180.0
+    a0 = float(_decimal(np.float32([a_min]), scale=deg)[0])
+    da = float(_decimal(np.float32([a_inc]), scale=deg)[0])
+    angles = a0 + da * np.arange(n_beams)
+    mr = float(_decimal(np.float32([r_max]))[0])
+    mn = float(_decimal(np.float32([r_min]))[0])
+    ranges = _decimal(np.vstack(m.ranges))
+    bad = ~np.isfinite(ranges) | (ranges < mn) | (ranges > mr)
+    ranges[bad] = mr
+    return angles, ranges, bad, mr, mn
+
+
+def _interpolate(o_st: NDArray, o_pose: NDArray, ts: NDArray, meta: dict) -> NDArray:
+    """The odometry pose at each scan time: linear between the samples around it (AMCL asks tf the same)."""
+    j = np.clip(np.searchsorted(o_st, ts, side="right") - 1, 0, max(o_st.size - 2, 0))
+    odom = np.empty((ts.size, 3))
+    if o_st.size == 1:
+        odom[:] = o_pose[0]
+        return odom
+    t0, t1 = o_st[j], o_st[j + 1]
+    frac = (ts - t0) / (t1 - t0)
+    p0, p1 = o_pose[j], o_pose[j + 1]
+    odom[:, :2] = p0[:, :2] + frac[:, None] * (p1[:, :2] - p0[:, :2])
+    odom[:, 2] = wrap_angle(p0[:, 2] + frac * wrap_angle(p1[:, 2] - p0[:, 2]))
+    exact0, exact1 = frac == 0, frac == 1
+    odom[exact0], odom[exact1] = p0[exact0], p1[exact1]
+    meta["largest_odometry_gap_s"] = round(float(np.max(t1 - t0)) / _NS_PER_S, 6)
+    return odom
+
+
 def _read(root: Path, reader, scan_topic, odom_topic, laser_pose, odom_frame) -> LaserLog:
     topics = {c.topic: c.msgtype for c in reader.connections}
     fmt = "rosbag1" if not reader.is2 else ("mcap" if any(p.suffix == ".mcap" for p in _storage_files(root))
@@ -323,138 +543,24 @@ def _read(root: Path, reader, scan_topic, odom_topic, laser_pose, odom_frame) ->
                                             required=False)
     tf_topics = [t for t, m in topics.items() if m in TF_TYPES]
     wanted = {scan_t, *odom_t, *tf_topics}
-    conns = [c for c in reader.connections if c.topic in wanted]
-
-    scan_stamps: list[int] = []
-    scan_rec: list[int] = []
-    scan_ranges: list[NDArray] = []
-    layout: tuple | None = None
-    frame = ""
-    odo: list[tuple[int, float, float, float, str, str]] = []
-    dyn: dict[tuple[str, str], list[tuple[int, NDArray]]] = {}
-    static: dict[tuple[str, str], NDArray] = {}
-    for conn, rec_time, raw in reader.messages(connections=conns):
-        msg = reader.deserialize(raw, conn.msgtype)
-        if conn.topic == scan_t:
-            n = len(msg.ranges)
-            lay = (n, float(msg.angle_min), float(msg.angle_increment), float(msg.range_min), float(msg.range_max))
-            if layout is None:
-                layout, frame = lay, msg.header.frame_id
-                if n == 0:
-                    raise FormatError(root, None, f"{scan_t}: the first scan has no ranges")
-            elif lay != layout:
-                k = len(scan_stamps)
-                raise FormatError(root, None, f"{scan_t}: scan {k} has the layout (beams, angle_min, "
-                                              f"angle_increment, range_min, range_max) = {lay}, scan 0 had {layout}; "
-                                              "expected one laser with a fixed layout")
-            scan_stamps.append(_stamp(msg.header))
-            scan_rec.append(int(rec_time))
-            scan_ranges.append(np.asarray(msg.ranges, dtype=np.float32))
-        elif conn.topic in odom_t:
-            p = msg.pose.pose
-            q = p.orientation
-            yaw = float(quaternion_to_yaw([q.x, q.y, q.z, q.w]))
-            odo.append((_stamp(msg.header), float(p.position.x), float(p.position.y), yaw, msg.header.frame_id,
-                        msg.child_frame_id))
-        else:
-            is_static = conn.topic.endswith("tf_static")
-            for tr in msg.transforms:
-                t, r = tr.transform.translation, tr.transform.rotation
-                key = (tr.header.frame_id.lstrip("/"), tr.child_frame_id.lstrip("/"))
-                m = _matrix([t.x, t.y, t.z], [r.x, r.y, r.z, r.w])
-                if is_static:
-                    static[key] = m
-                else:
-                    dyn.setdefault(key, []).append((_stamp(tr.header), m))
-    if not scan_stamps:
-        raise FormatError(root, None, f"{scan_t} holds no messages")
-    assert layout is not None
-    n_beams, a_min, a_inc, r_min, r_max = layout
-    frame = frame.lstrip("/")
-    stamps = np.asarray(scan_stamps, dtype=np.int64)
+    m = _collect(root, reader, [c for c in reader.connections if c.topic in wanted], scan_t, odom_t)
+    frame = m.frame.lstrip("/")
+    stamps = np.asarray(m.stamps, dtype=np.int64)
     meta: dict[str, Any] = {"scan_topic": scan_t, "scan_frame": frame, "bag_format": fmt}
     if np.all(stamps == 0):
-        stamps = np.asarray(scan_rec, dtype=np.int64)
+        stamps = np.asarray(m.rec, dtype=np.int64)
         meta["scan_stamps"] = "header stamps are zero: the bag's record times are used"
     _check_time(root, scan_t, stamps)
-
-    # ---------------------------------------------------------------- odometry
     if odom_t:
-        o_st = np.array([o[0] for o in odo], dtype=np.int64)
-        if o_st.size == 0:
-            raise FormatError(root, None, f"scans without odometry: {odom_t[0]} holds no messages")
-        _check_time(root, odom_t[0], o_st)
-        o_pose = np.array([o[1:4] for o in odo], dtype=float)
-        parent, base = odo[0][4].lstrip("/") or "odom", odo[0][5].lstrip("/") or "base_link"
-        meta["odometry"] = f"nav_msgs/Odometry on {odom_t[0]} ({parent} -> {base})"
-        meta["odom_topic"] = odom_t[0]
+        o_st, o_pose, parent, base = _odometry_topic(m, meta)
     else:
-        pairs = sorted(dyn)
-        if not pairs:
-            raise FormatError(root, None, f"scans without odometry: the bag has no {ODOM_TYPE} topic and no "
-                                          f"transforms on /tf; {_topic_list(topics)}")
-        if odom_frame is not None:
-            cands = [p for p in pairs if p[0] == odom_frame]
-        else:
-            cands = [p for p in pairs if p[0] == "odom"] or [p for p in pairs if p[0] not in _GLOBAL_FRAMES]
-        if len(cands) > 1:  # keep the one whose child reaches the laser through static transforms
-            linked = [p for p in cands if _tf_graph_pose(static, p[1], frame) is not None]
-            cands = linked if linked else cands
-        if len(cands) != 1:
-            listed = ", ".join(f"{a} -> {b}" for a, b in pairs)
-            raise FormatError(root, None, f"scans without odometry: cannot tell the odometry transform on /tf "
-                                          f"(transforms there: {listed}); expected one odom -> base transform, or a "
-                                          f"{ODOM_TYPE} topic (--odom-topic)")
-        parent, base = cands[0]
-        seq = dyn[cands[0]]
-        o_st = np.array([s for s, _ in seq], dtype=np.int64)
-        _check_time(root, f"/tf ({parent} -> {base})", o_st)
-        o_pose = np.array([[m[0, 3], m[1, 3], np.arctan2(m[1, 0], m[0, 0])] for _, m in seq])
-        meta["odometry"] = f"/tf transform {parent} -> {base}"
-    # equal stamps: keep the last sample of each
-    keep = np.append(o_st[1:] != o_st[:-1], True)
+        o_st, o_pose, parent, base = _odometry_tf(m, meta, topics, odom_frame, frame)
+    keep = np.append(o_st[1:] != o_st[:-1], True)  # equal stamps: keep the last sample of each
     o_st, o_pose = o_st[keep], o_pose[keep]
     o_pose[:, 2] = wrap_angle(o_pose[:, 2])
     meta["base_frame"], meta["odom_frame"] = base, parent
-
-    # ---------------------------------------------------------------- laser mounting
-    if laser_pose is not None:
-        off = np.asarray(laser_pose, dtype=float).reshape(-1)
-        if off.shape != (3,) or not np.all(np.isfinite(off)):
-            raise ValueError(f"laser_pose must be three finite numbers (x, y, yaw); got {laser_pose!r}")
-        flip = False
-        meta["sensor_offset_source"] = "given (laser_pose / --laser-pose)"
-    else:
-        edges = dict(static)
-        for key, seq in dyn.items():  # constant transforms on /tf count as static
-            if key != (parent, base) and all(np.allclose(m, seq[0][1], atol=1e-9) for _, m in seq):
-                edges.setdefault(key, seq[0][1])
-        m = _tf_graph_pose(edges, base, frame)
-        if m is None:
-            known = sorted({f for k in static for f in k})
-            raise FormatError(root, None, f"no transform from the base frame '{base}' to the laser frame '{frame}' "
-                                          f"on /tf_static (frames there: {', '.join(known) or 'none'}); give the "
-                                          "laser's mounting pose with --laser-pose X Y YAW (metres, radians; "
-                                          "0 0 0 if the laser sits at the robot's centre)")
-        off = np.array([m[0, 3], m[1, 3], np.arctan2(m[1, 0], m[0, 0])])
-        flip = bool(m[2, 2] < 0)
-        if abs(m[2, 2]) < np.cos(np.radians(5.0)):
-            meta["sensor_tilt_warning"] = f"the laser is tilted {np.degrees(np.arccos(abs(m[2, 2]))):.1f} degrees"
-        meta["sensor_offset_source"] = f"/tf_static chain {base} -> {frame}" + (" (mounted upside down)" if flip
-                                                                                  else "")
-    # ---------------------------------------------------------------- scans and pairing
-    deg = np.pi / 180.0
-    a0 = float(_decimal(np.float32([a_min]), scale=deg)[0])
-    da = float(_decimal(np.float32([a_inc]), scale=deg)[0])
-    angles = a0 + da * np.arange(n_beams)
-    mr = float(_decimal(np.float32([r_max]))[0])
-    mn = float(_decimal(np.float32([r_min]))[0])
-    if not (np.isfinite(mr) and mr > 0):
-        raise FormatError(root, None, f"{scan_t}: range_max is {r_max}; expected a positive number of metres")
-    raw = np.vstack(scan_ranges)
-    ranges = _decimal(raw)
-    bad = ~np.isfinite(ranges) | (ranges < mn) | (ranges > mr)
-    ranges[bad] = mr
+    off, flip = _laser_mounting(m, meta, laser_pose, parent, base, frame)
+    angles, ranges, bad, mr, mn = _scan_arrays(m)
     if flip:
         angles, ranges = -angles[::-1], ranges[:, ::-1]
     inside = (stamps >= o_st[0]) & (stamps <= o_st[-1])
@@ -465,19 +571,7 @@ def _read(root: Path, reader, scan_topic, odom_topic, laser_pose, odom_frame) ->
                                       f"odometry's time span ({o_st[0] / _NS_PER_S:.3f} .. {o_st[-1] / _NS_PER_S:.3f} s)")
     meta["invalid_readings"] = int(bad[inside].sum())  # NaN, inf, outside [range_min, range_max]: no return
     ts = stamps[inside]
-    j = np.clip(np.searchsorted(o_st, ts, side="right") - 1, 0, max(o_st.size - 2, 0))
-    odom = np.empty((ts.size, 3))
-    if o_st.size == 1:
-        odom[:] = o_pose[0]
-    else:
-        t0, t1 = o_st[j], o_st[j + 1]
-        frac = (ts - t0) / (t1 - t0)
-        p0, p1 = o_pose[j], o_pose[j + 1]
-        odom[:, :2] = p0[:, :2] + frac[:, None] * (p1[:, :2] - p0[:, :2])
-        odom[:, 2] = wrap_angle(p0[:, 2] + frac * wrap_angle(p1[:, 2] - p0[:, 2]))
-        exact0, exact1 = frac == 0, frac == 1
-        odom[exact0], odom[exact1] = p0[exact0], p1[exact1]
-        meta["largest_odometry_gap_s"] = round(float(np.max(t1 - t0)) / _NS_PER_S, 6)
+    odom = _interpolate(o_st, o_pose, ts, meta)
     skipped = {"scans outside the odometry's time span": dropped} if dropped else {}
     meta.update({"range_min": mn, "scans_in_bag": int(stamps.size)})
     return LaserLog(times=ts / _NS_PER_S, odometry=odom, ranges=ranges[inside], angles=angles,
