@@ -572,11 +572,16 @@ def _cmd_map(args, out: TextIO, err: TextIO | None = None) -> int:
     return 0
 
 
+def _inputs(args) -> Inputs:
+    """What ``localize run`` reads, from its options."""
+    return Inputs(log=args.log, map=args.map, log_format=args.log_format, map_format=args.map_format,
+                  scan_topic=args.scan_topic, odom_topic=args.odom_topic,
+                  laser_pose=None if args.laser_pose is None else tuple(args.laser_pose), build_map=args.build_map,
+                  resolution=args.resolution, not_free_is_occupied=args.not_free_is_occupied, scans=args.scans)
+
+
 def _cmd_run(args, out: TextIO, err: TextIO) -> int:
-    inputs = Inputs(log=args.log, map=args.map, log_format=args.log_format, map_format=args.map_format,
-                    scan_topic=args.scan_topic, odom_topic=args.odom_topic,
-                    laser_pose=None if args.laser_pose is None else tuple(args.laser_pose), build_map=args.build_map,
-                    resolution=args.resolution, not_free_is_occupied=args.not_free_is_occupied, scans=args.scans)
+    inputs = _inputs(args)
     settings, amcl = _run_settings(args, out, err)  # a bad parameter file is reported before --out is touched
     with RunOutput(args.out) as dest:  # the results appear in --out only when complete (localize._output)
         dest.open()  # check that --out can be written, and lock it, before anything else
@@ -710,7 +715,8 @@ def _cmd_demo(args, out: TextIO, err: TextIO) -> int:
             print("localizing: localize " + " ".join(shown), file=out)
         run_args = build_parser().parse_args(argv)
         run_args._argv = shown
-        code = _run(run_args, out, err, dest, _apply_amcl(run_args, out, err))
+        settings, amcl = _run_settings(run_args, out, err)
+        code = _run(run_args, _inputs(run_args), settings, amcl, out, err, dest)
     if not quiet:
         cs, med = score["convergence_step_truth"], score["median_error_after_convergence_m"]
         print(f"against the true poses: within 0.5 m from scan {cs}" + (f", median error {med} m after that"
