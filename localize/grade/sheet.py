@@ -60,10 +60,14 @@ def feedback_text(grade: Grade) -> str:
 
     Examples
     --------
-    >>> print(feedback_text(Grade("ada", {"normalize": 1}, {"normalize": "normalize: all 5 checks passed"}))[:60])
+    >>> text = feedback_text(Grade("ada", {"normalize": 1}, {"normalize": "normalize: all 5 checks passed"}))
+    >>> print("\n".join(text.splitlines()[:6]))
     Homework feedback for ada: 1 of 32 points
     <BLANKLINE>
-    ## 0. world_to_c
+    ## 0. world_to_cell: 0 of 1 points
+    world_to_cell: not graded (see the notes above)
+    <BLANKLINE>
+    ## 1. normalize: 1 of 1 points
     """
     out = [f"Homework feedback for {grade.student}: {grade.total} of {max_points()} points", ""]
     if grade.notes:
