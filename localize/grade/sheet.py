@@ -61,7 +61,8 @@ def feedback_text(grade: Grade) -> str:
     Examples
     --------
     >>> text = feedback_text(Grade("ada", {"normalize": 1}, {"normalize": "normalize: all 5 checks passed"}))
-    >>> print("\n".join(text.splitlines()[:6]))
+    >>> for line in text.splitlines()[:6]:
+    ...     print(line)
     Homework feedback for ada: 1 of 32 points
     <BLANKLINE>
     ## 0. world_to_cell: 0 of 1 points
