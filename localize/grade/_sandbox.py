@@ -177,7 +177,7 @@ def _run_cells(cells: list[str], ns: dict, limit: float, emit: Callable[[dict], 
         if not source.strip() or _is_check_cell(source):
             continue
         try:
-            code = compile(_strip_magics(source), f"<cell {k + 1}>", "exec")
+            code = compile(_strip_magics(source), f"<code cell {k + 1}>", "exec")
         except SyntaxError as err:
             emit({"kind": "cell", "cell": k + 1, "error": f"SyntaxError: {err.msg} (line {err.lineno})"})
             continue
@@ -275,9 +275,14 @@ def main(work: str) -> None:
     sys.addaudithook(_audit_hook(work, os.path.realpath(grader), tuple(job["forbidden"]), found))
     ns: dict = {"__name__": "__main__"}
     try:
-        _run_cells(_cells(Path(work, job["notebook"])), ns, job["cell_limit"], emit)
+        cells = _cells(Path(work, job["notebook"]))
+    except (ValueError, OSError, AttributeError, TypeError) as err:
+        emit({"kind": "notebook", "error": f"not a readable notebook: {type(err).__name__}: {err}"[:300]})
+        cells = []
+    try:
+        _run_cells(cells, ns, job["cell_limit"], emit)
     except BaseException:  # noqa: BLE001 - never expected; recorded so that the teacher sees it
-        emit({"kind": "cell", "cell": 0, "error": traceback.format_exc(limit=3)[-300:]})
+        emit({"kind": "notebook", "error": "grading stopped: " + traceback.format_exc(limit=3)[-300:]})
     tampered = found + _changed(before)
     if tampered:
         emit({"kind": "tamper", "why": tampered})

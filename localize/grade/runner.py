@@ -166,7 +166,9 @@ def _interpret(student: str, lines: list[str], ended: str) -> Grade:
     for r in records:
         kind = r.get("kind")
         if kind == "cell" and "the grader refuses this" not in str(r.get("error")):
-            grade.notes.append(f"cell {r.get('cell')}: {r.get('error')}")
+            grade.notes.append(f"code cell {r.get('cell')}: {r.get('error')}")
+        elif kind == "notebook":
+            grade.notes.append(str(r.get("error")))
         elif kind == "task" and r.get("function") in points:
             f = r["function"]
             grade.points[f] = points[f] if r.get("passed") is True else 0
