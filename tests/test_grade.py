@@ -218,3 +218,28 @@ def test_a_notebook_that_is_not_json_gets_zero_with_the_reason(tmp_path):
     assert grade.total == 0
     assert grade.notes[0].startswith("not a readable notebook: JSONDecodeError"), grade.notes
 
+
+
+@pytest.mark.slow
+def test_otter_grades_like_the_grader(tmp_path):
+    """The otter-grader route (otter assign, then otter run without Docker) gives each section the same points."""
+    pytest.importorskip("otter", reason="otter-grader is not installed (pip install -e '.[grade]')")
+    import json
+
+    otter = [sys.executable, "-m", "otter"]
+    r = subprocess.run([*otter, "assign", str(ROOT / "teacher" / "otter" / "homework.ipynb"), str(tmp_path / "dist")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    (zip_path,) = (tmp_path / "dist" / "autograder").glob("*.zip")
+    for kind in ("full", "wraps"):
+        nb = tmp_path / f"{kind}.ipynb"
+        nbformat.write(filled(*KINDS[kind][:2]), nb)
+        out = tmp_path / f"out_{kind}"
+        out.mkdir()
+        r = subprocess.run([*otter, "run", "-a", str(zip_path), "-o", str(out), str(nb)], capture_output=True,
+                           text=True)
+        assert r.returncode == 0, r.stdout + r.stderr
+        scores = {t["name"]: t["score"] for t in json.loads((out / "results.json").read_text())["tests"]
+                  if "score" in t}
+        grade = grade_submission(nb)
+        assert scores == {f"q{s.number}": float(grade.section_points(s)) for s in SECTIONS}, kind

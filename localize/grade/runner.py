@@ -59,7 +59,7 @@ class Limits:
 
     submission_s: float = 300.0
     cell_s: float = 60.0
-    task_s: float = 60.0
+    task_s: float = 20.0
     memory_mb: float = 2048.0
 
     def __post_init__(self) -> None:
@@ -152,35 +152,46 @@ def _environment(work: Path) -> dict[str, str]:
     return env
 
 
+def _records(lines: list[str]) -> list[dict]:
+    """The JSON objects among the sandbox's result lines (anything else is skipped)."""
+    out = []
+    for line in lines:
+        try:
+            record = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(record, dict):
+            out.append(record)
+    return out
+
+
+def _apply(grade: Grade, r: dict, points: dict[str, int]) -> None:
+    """Enter one finding of the sandbox into ``grade``."""
+    kind = r.get("kind")
+    if kind == "cell" and "the grader refuses this" not in str(r.get("error")):
+        grade.notes.append(f"code cell {r.get('cell')}: {r.get('error')}")
+    elif kind == "notebook":
+        grade.notes.append(str(r.get("error")))
+    elif kind == "task" and r.get("function") in points:
+        f = r["function"]
+        grade.points[f] = points[f] if r.get("passed") is True else 0
+        grade.reports[f] = str(r.get("report", ""))
+        grade.hints[f] = str(r.get("hint", ""))
+        if r.get("timeout") or r.get("crashed"):
+            grade.notes.append(grade.reports[f])
+    elif kind == "tamper":
+        grade.tampered = True
+        grade.notes[:0] = [f"zero for tampering: the submission {why}" for why in r.get("why", [])]
+
+
 def _interpret(student: str, lines: list[str], ended: str) -> Grade:
     """Turn the sandbox's JSON lines (and how its process ended) into a :class:`Grade`."""
     grade = Grade(student)
-    records = []
-    for line in lines:
-        try:
-            records.append(json.loads(line))
-        except ValueError:
-            continue
     points = {t.function: t.points for s in SECTIONS for t in s.tasks}
-    done = False
+    records = _records(lines)
     for r in records:
-        kind = r.get("kind")
-        if kind == "cell" and "the grader refuses this" not in str(r.get("error")):
-            grade.notes.append(f"code cell {r.get('cell')}: {r.get('error')}")
-        elif kind == "notebook":
-            grade.notes.append(str(r.get("error")))
-        elif kind == "task" and r.get("function") in points:
-            f = r["function"]
-            grade.points[f] = points[f] if r.get("passed") is True else 0
-            grade.reports[f] = str(r.get("report", ""))
-            grade.hints[f] = str(r.get("hint", ""))
-            if r.get("timeout") or r.get("crashed"):
-                grade.notes.append(grade.reports[f])
-        elif kind == "tamper":
-            grade.tampered = True
-            grade.notes[:0] = [f"zero for tampering: the submission {why}" for why in r.get("why", [])]
-        elif kind == "done":
-            done = True
+        _apply(grade, r, points)
+    done = any(r.get("kind") == "done" for r in records)
     if not done:
         grade.notes.append(ended)
     missing = [f for f in points if f not in grade.reports]
