@@ -90,7 +90,16 @@ def grade_class(folder: str | os.PathLike, out: str | os.PathLike, jobs: int = 2
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The command line: ``python -m localize.grade SUBMISSIONS [--out DIR] [--jobs N] [limits]``."""
+    """The command line: ``python -m localize.grade SUBMISSIONS [--out DIR] [--jobs N] [limits]``.
+
+    Returns the exit status: 0 when the class was graded, 2 (with the reason on
+    stderr) when the input was wrong.
+
+    Examples
+    --------
+    >>> main([str(tmp_dir() / "nowhere")])          # stderr: error: ... is not a folder: give the folder ...
+    2
+    """
     parser = argparse.ArgumentParser(prog="python -m localize.grade", description=(
         "Grade a class's homework notebooks: each in its own process under time and memory limits, "
         "with the checks of localize.check. Writes OUT/grades.csv and OUT/feedback/STUDENT.txt."))

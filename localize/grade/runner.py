@@ -83,6 +83,8 @@ class Grade:
     >>> g = Grade("ada", {"normalize": 1}, {"normalize": "normalize: all 5 checks passed"})
     >>> g.section_points(SECTIONS[1]), g.total
     (1, 1)
+    >>> Grade("bob", {"normalize": 0}, hints={"normalize": "divide by the sum"}).first_hint
+    'normalize: divide by the sum'
     """
 
     student: str
