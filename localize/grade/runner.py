@@ -8,6 +8,8 @@ path, so the teacher's solutions cannot be imported) with
 and core dumps, and turns what the process reports into a :class:`Grade`.
 The process is killed when it runs past the submission's time limit; whatever
 it graded by then keeps its points, everything else gets zero with the reason.
+It needs a POSIX system (``resource``, ``fork``; tested on Linux, where
+``RLIMIT_AS`` is enforced).
 """
 
 from __future__ import annotations
