@@ -14,6 +14,8 @@ from nbclient import NotebookClient
 
 ROOT = Path(__file__).resolve().parents[1]
 HW = ROOT / "book" / "homework"
+#: The teachers' source, outside the student's folder (tools/make_homework.py generates the student notebook from it).
+SOLUTIONS = ROOT / "teacher" / "homework_solutions.py"
 #: Functions the student writes (one stub each in the template, one checked report each).
 N_EXERCISES = 21
 
@@ -49,9 +51,29 @@ def test_template_has_stubs_and_no_solutions():
     assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code")
 
 
+def test_the_student_folder_holds_only_what_a_student_gets():
+    assert sorted(p.name for p in HW.iterdir() if not p.name.startswith(".")) == ["homework.ipynb"]
+    assert not list((ROOT / "book").rglob("*solutions*")), "solutions inside book/"
+
+
+def test_otter_assignment_has_the_points_and_checks_of_the_grader():
+    """The otter-grader master notebook: one question per section, its points and its check calls."""
+    from localize.grade.sections import SECTIONS
+
+    nb = nbformat.read(ROOT / "teacher" / "otter" / "homework.ipynb", as_version=4)
+    assert nb.cells[0].cell_type == "raw" and nb.cells[0].source.startswith("# ASSIGNMENT CONFIG")
+    questions = [c.source for c in nb.cells if c.cell_type == "raw" and c.source.startswith("# BEGIN QUESTION")]
+    assert questions == [f"# BEGIN QUESTION\nname: q{s.number}\npoints:\n"
+                         + "\n".join(f"  - {t.points}" for t in s.tasks) for s in SECTIONS]
+    tests = [c.source for c in nb.cells if c.cell_type == "code" and c.source.startswith("report = check.")]
+    assert tests == [f"report = {t.call()}\nprint(report.passed or report)" for s in SECTIONS for t in s.tasks]
+    code = "\n".join(c.source for c in nb.cells if c.cell_type == "code")
+    assert code.count("# BEGIN SOLUTION") == code.count("# END SOLUTION") >= N_EXERCISES
+
+
 @pytest.mark.slow
 def test_solutions_pass_every_check(tmp_path):
-    text = _run(jupytext.read(HW / "homework_solutions.py"), tmp_path)
+    text = _run(jupytext.read(SOLUTIONS), tmp_path)
     assert "FAILED" not in text, text
     assert text.count("checks passed") == N_EXERCISES, text
 
@@ -67,7 +89,7 @@ def _solutions() -> tuple[dict, dict]:
     """The homework's imports run in one namespace, and each solution cell's source by function name."""
     ns: dict = {}
     cells = {}
-    for cell in jupytext.read(HW / "homework_solutions.py").cells:
+    for cell in jupytext.read(SOLUTIONS).cells:
         if cell.cell_type != "code":
             continue
         if "solution" in cell.metadata.get("tags", []):

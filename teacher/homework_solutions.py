@@ -26,10 +26,13 @@
 # derived from the sample size: a correct sampler passes every time.
 
 # %% [markdown] tags=["teacher"]
-# *Teachers:* this is the solutions source. The student notebook
-# `homework.ipynb` is generated from it by `python tools/make_homework.py`,
-# which replaces the body of every function in a cell tagged `solution` by
-# `raise NotImplementedError` and drops cells tagged `teacher`.
+# *Teachers:* this is the solutions source, kept outside the student's folder.
+# `python tools/make_homework.py` generates from it the student notebook
+# `book/homework/homework.ipynb` (the body of every function in a cell tagged
+# `solution` becomes `raise NotImplementedError`; cells tagged `teacher` are
+# dropped) and the otter-grader assignment `teacher/otter/homework.ipynb`.
+# Grade a class with `python -m localize.grade SUBMISSIONS --out grades/`
+# (chapter 12, "Teaching with this book").
 
 # %%
 import math
@@ -38,7 +41,9 @@ from pathlib import Path
 import numpy as np
 
 from localize import check, io
+from localize.ekf import landmark_jacobian, landmark_measurement
 from localize.geometry import wrap_angle
+from localize.kld import bin_keys, kld_bound
 
 # %% [markdown]
 # ## 0. Which cell is a point in? (preface)
@@ -431,9 +436,6 @@ check.predict_stop(predict_stop)
 # qualifies. `bin_keys(samples, bin_size)` gives each sample's bin as one
 # integer.
 
-# %%
-from localize.kld import bin_keys, kld_bound
-
 # %% tags=["solution"]
 def kld_count(samples, bin_size, epsilon, delta, n_min):
     """Number of samples KLD-sampling draws before its stopping rule is met."""
@@ -502,9 +504,6 @@ check.xy_reader(read_xy_log)
 # (keep it) when $y^\top S^{-1} y \le 9.21$, the 99% point of $\chi^2$ with two
 # degrees of freedom. What does a gate protect the EKF against, and why does
 # it keep a kidnapped robot lost?
-
-# %%
-from localize.ekf import landmark_jacobian, landmark_measurement
 
 # %% tags=["solution"]
 def in_gate(mean, cov, z, landmark, Q):
