@@ -880,6 +880,16 @@ plt.show()
 #    tempering, and find for 61 beams the `temper` that gives the same mean
 #    ESS as 10 beams. What does that say about how many "independent" beams
 #    the 61 are worth?
+# 4. **Implementation (self-checked).** Write the simplest ray caster of all,
+#    for one beam: `my_ray_cast(grid, pose, angle, max_range)` walks from the
+#    sensor at `pose = (x, y, theta)` in the direction `theta + angle` in fixed
+#    steps and returns the distance at which a step first lands in an obstacle
+#    cell (`grid.obstacles`, indexed by `grid.world_to_cell`), or `max_range`
+#    if none does within `max_range` or the beam leaves the map. Check it with
+#    `localize.check.ray_cast(my_ray_cast)`: its map has walls one cell thick,
+#    and it accepts a range within one cell of the exact one. Then make the
+#    step one and a half cells and run the check again. What goes wrong, and
+#    why? (See "The simplest marcher, and its step size" above.)
 
 # %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
@@ -995,5 +1005,50 @@ print(f"20 beams give a larger mean ESS than 10 for {wins} of 6 seeds of five sc
 # independent beams the tempered scan is treated as. On real data the right $\gamma$ is found by
 # experiment (the MCL chapters), since it depends on how correlated the beams' errors really
 # are: a map error seen by 20 neighbouring beams is one piece of evidence, not twenty.
+#
+# </details>
+
+
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
+# Solution (click to show)
+# Exercise 4
+from localize import check  # noqa: E402
+
+
+def my_ray_cast(grid, pose, angle, max_range, step=None):
+    """Walk along the beam in fixed steps (a quarter of a cell unless told) until a step lands in an obstacle."""
+    x, y, theta = pose
+    step = grid.resolution / 4 if step is None else step
+    c, s = math.cos(theta + angle), math.sin(theta + angle)
+    t = 0.0
+    while t < max_range:
+        p = (x + t * c, y + t * s)
+        if not grid.contains(p):
+            return max_range
+        if grid.obstacles[tuple(grid.world_to_cell(p))]:
+            return t
+        t += step
+    return max_range
+
+
+print(check.ray_cast(my_ray_cast))
+print()
+print(check.ray_cast(lambda grid, pose, angle, max_range: my_ray_cast(grid, pose, angle, max_range,
+                                                                       step=1.5 * grid.resolution)))
+
+# %% [markdown] tags=["solution"]
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
+#
+# With a quarter-cell step the first step inside a wall is at most a quarter
+# of a cell beyond where the beam entered it, so the range is a little too
+# long but well within one cell, and the check passes. With a step of one and
+# a half cells a step can land on each side of a wall one cell thick without
+# ever landing in it: the beam passes through the wall and reads whatever lies
+# behind, the slip described in the chapter. Shorter steps make the slip rarer
+# but cost more lookups per ray, and a step of any fixed length can still cut
+# the corner of an obstacle cell; walking from cell to cell across every grid
+# line, as `localize.raycast.cast_ray` does, visits every cell the beam
+# touches and never slips.
 #
 # </details>
