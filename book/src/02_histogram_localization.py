@@ -222,10 +222,13 @@ assert round(by_hand, 4) == round(float(raw[2, 4]), 4) == round(float(raw_loops[
 # With the noisy model the belief spreads more after each move, and more readings
 # are needed before one tile stands out. Use the widget below: the slider
 # *motion noise* is the chance of not reaching the intended tile (0.5 is the model
-# above), *sensor right* is `p_hit` (with `p_miss = 1 - p_hit`), and the button
-# performs one sense-and-move cycle along a fixed path whose first three readings
-# are blue, green and red. The true tile is circled. (In the HTML book the
-# figure after the widget shows three cycles with the noisy model.)
+# above), *sensor right* is `p_hit` (with `p_miss = 1 - p_hit`), and each press
+# of the button *next cycle* ends on a reading, as the worked example does: the
+# first press reads the colour under the robot, every later one moves the robot
+# one tile along a fixed path and then reads. The first three cycles are the
+# worked example (blue, left, green, up, red), so with the motion noise at 0
+# the third shows its final table. The true tile is circled. (In the HTML book
+# the figure after the widget shows three cycles with the noisy model.)
 
 # %% tags=["nbval-ignore-output"]
 from localize.widgets.histogram import TILE_PATH, tile_world_app, tile_world_figure, tile_world_run  # noqa: E402
