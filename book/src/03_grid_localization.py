@@ -163,14 +163,12 @@ assert 0.001 < loc.marginal_xy()[east].sum() < 0.01
 
 # left: the whole office on a log colour scale, so that the faint mirror candidate shows;
 # right: the 2 m around the start on a linear scale. The truth is a ring, so it hides no cell.
-from matplotlib.colors import LogNorm  # noqa: E402
-
 m = loc.marginal_xy()
 fig, axes = plt.subplots(1, 2, figsize=(11, 3.9), width_ratios=(2.2, 1), layout="constrained")
 draw_map(grid, axes[0], alpha=0.35)
-img = axes[0].imshow(np.ma.masked_less(m, 1e-5), origin="lower", extent=grid.extent, cmap="viridis",
-                     norm=LogNorm(1e-5, m.max()))
-fig.colorbar(img, ax=axes[0], label="belief per 20 cm cell (log scale)", shrink=0.85)
+img = axes[0].imshow(np.ma.masked_where(m < 1e-5, np.log10(np.maximum(m, 1e-5))), origin="lower", extent=grid.extent,
+                     cmap="viridis", vmin=-5, vmax=0)
+fig.colorbar(img, ax=axes[0], label="log10 of the belief per 20 cm cell", shrink=0.85)
 axes[0].annotate(f"mirror candidate: {m[east].sum():.1%} of the belief", (cell_xy[i2, j2, 0], cell_xy[i2, j2, 1]),
                  xytext=(12.0, 8.0), fontsize=8, arrowprops=dict(arrowstyle="->", color="k"))
 axes[0].set_title("after the first scan: belief over (x, y), summed over headings", fontsize=9)
