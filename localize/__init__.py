@@ -24,6 +24,46 @@ name                                                            module
 ``EKFLocalizer``, ``UKFLocalizer``                              :mod:`localize.ekf` (chapter 10)
 ``OccupancyGrid``, ``wrap_angle``                               :mod:`localize.grid`, :mod:`localize.geometry`
 ==============================================================  ==============================================
+
+The modules, in the order the book meets them (``help(localize.<module>)``
+lists each one's functions):
+
+===============================  ==========================================================================
+module                           what it holds
+===============================  ==========================================================================
+:mod:`localize.geometry`         angles and planar poses: ``wrap_angle``, pose composition (preface)
+:mod:`localize.grid`             ``OccupancyGrid``: cells, resolution, origin, distance field (preface)
+:mod:`localize.maps`             built-in worlds: ``office``, ``tile_world``, ``city_world``, ... (preface on)
+:mod:`localize.discrete`         the discrete Bayes filter on a hallway: ``update``, ``predict`` (chapter 1)
+:mod:`localize.histogram`        the tile world: ``sense``, ``move``, noisy step kernels (chapter 2)
+:mod:`localize.multiscale`       coarse-to-fine histogram localization (chapter 2)
+:mod:`localize.gridloc`          (x, y, theta) grid localization, ``coarsen`` (chapter 3)
+:mod:`localize.motion`           odometry and velocity motion models: samplers and densities (chapter 4)
+:mod:`localize.raycast`          expected ranges: exact walk, ray marcher, lookup table (chapter 5)
+:mod:`localize.sensors`          beam model, likelihood field, landmark model (chapter 5)
+:mod:`localize.beam_learning`    fitting the beam model's parameters (chapter 5)
+:mod:`localize.resample`         resamplers and the effective sample size (chapter 6)
+:mod:`localize.diagnostics`      exact posteriors and distances to judge a particle filter (chapters 6, 8)
+:mod:`localize.mcl`              MCL, augmented MCL, ``run_filter`` over a log (chapters 7, 8)
+:mod:`localize.kld`              KLD-sampling (chapter 8)
+:mod:`localize.sim`              simulated robots: odometry, scans, sightings, kidnapping (chapters 3-10)
+:mod:`localize.metrics`          errors, RMSE, NEES, convergence, success rates (chapters 7-10)
+:mod:`localize.io`               maps and logs: CMU, CARMEN, ROS map_server and bags (chapter 9)
+:mod:`localize.mapping`          occupancy grid mapping with known poses (chapter 9)
+:mod:`localize.scanmatch`        does the odometry agree with the scans? (chapter 9)
+:mod:`localize.smooth`           forwards and backwards over a recorded log (chapter 9)
+:mod:`localize.cli`              ``python -m localize``: the command line (chapter 9)
+:mod:`localize.ekf`              EKF and UKF landmark localization (chapter 10)
+:mod:`localize.compare`          the EKF-versus-MCL experiments (chapter 10)
+:mod:`localize.plot`             figures, one module per topic
+:mod:`localize.widgets`          the interactive figures of the chapters
+:mod:`localize.check`            self-checks for the exercises and the homework
+===============================  ==========================================================================
+
+Every submodule is in that list:
+
+    >>> all(f":mod:`localize.{name}`" in localize.__doc__ for name in localize._SUBMODULES)
+    True
 """
 
 from __future__ import annotations

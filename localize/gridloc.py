@@ -39,6 +39,7 @@ to.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -229,10 +230,26 @@ def _check_u(u: ArrayLike) -> tuple[NDArray, NDArray]:
 class GridLocalizer:
     """Markov localization on a grid of ``K`` headings x the map's cells.
 
+    The belief has one bin per free map cell and heading bin, so its cost
+    follows the map's resolution: for a coarser filter pass a coarser map,
+    :func:`coarsen` ``(grid, factor)``, which keeps thin walls (chapter 3
+    localizes on the 10 cm office coarsened to 20 cm and 50 cm).
+
+    **Beams are snapped onto the heading bins.** The expected ranges are
+    stored per heading bin (``K`` directions), so each beam is compared with
+    the expected range of the bin nearest to its absolute direction. With a
+    dense scan and coarse bins several beams land on the same bin: 180
+    one-degree beams on ``K = 36`` ten-degree bins use only 19 directions
+    (the half circle), and the about ten beams in each bin are all compared
+    with one expected range, as if the scan were ten repeated copies of 19
+    beams. Pass a subset, about one beam per bin (``angles[::10]`` there), or
+    more heading bins. The constructor warns when distinct beam angles share
+    a bin (``beams_per_bin`` tells how many land in each used bin).
+
     Parameters
     ----------
     grid : OccupancyGrid
-        The map; the filter's cells are the map's cells.
+        The map; the filter's cells are the map's cells (see :func:`coarsen`).
     n_headings : int
         Heading bins ``K`` (even, >= 4).
     angles : array_like, shape (B,)
@@ -267,6 +284,15 @@ class GridLocalizer:
     >>> loc = GridLocalizer(g, 8, angles=[0, np.pi / 2, np.pi, -np.pi / 2], max_range=5.0)
     >>> loc.belief.shape, round(float(loc.belief.sum()), 6)
     ((8, 5, 8), 1.0)
+
+    Twelve beams 10 degrees apart on 45-degree bins share them, and say so:
+
+    >>> import warnings
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     dense = GridLocalizer(g, 8, np.radians(np.arange(-60, 60, 10)), 5.0)
+    >>> dense.beams_per_bin, len(caught)
+    ({7: 4, 0: 5, 1: 3}, 1)
     """
 
     def __init__(self, grid: OccupancyGrid, n_headings: int, angles: ArrayLike, max_range: float, *,
@@ -284,6 +310,15 @@ class GridLocalizer:
             raise ValueError("angles must hold at least one beam angle; got an empty array")
         self.angles = a
         self.beam_bins = np.round(np.asarray(wrap_angle(a)) / self.bin_width).astype(int) % self.K
+        #: heading bin -> number of beams snapped onto it, in the order of the beams
+        self.beams_per_bin = {int(k): int(np.sum(self.beam_bins == k)) for k in dict.fromkeys(self.beam_bins.tolist())}
+        distinct = len(np.unique(np.round(np.asarray(wrap_angle(a)), 12)))
+        if distinct > len(self.beams_per_bin):
+            warnings.warn(
+                f"{distinct} distinct beam angles snap onto {len(self.beams_per_bin)} heading bins of "
+                f"{np.degrees(self.bin_width):.3g} degrees (up to {max(self.beams_per_bin.values())} beams per bin), "
+                "so beams in one bin are compared with the same expected range and count as repeated evidence; "
+                "pass about one beam per bin (a subset of the angles) or more heading bins", stacklevel=2)
         self.alphas = np.asarray(alphas, dtype=float)
         odometry_variances(0.0, 0.0, 0.0, self.alphas)   # validates alphas
         self.min_sigma_xy = check_nonnegative(min_sigma_xy, "min_sigma_xy", "cells")

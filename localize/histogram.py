@@ -82,7 +82,21 @@ def likelihood(world: ArrayLike, measurement, p_hit: float, p_miss: float) -> ND
     return np.where(match, ph, pm)
 
 
-_NO_Z = object()
+class _Required:
+    """The default of the reading of :func:`sense`: none given (it may come as ``measurement=`` or ``z=``).
+
+    A named sentinel, so that ``help(sense)`` shows ``measurement=<required>``
+    instead of an ``<object object at 0x...>`` address.
+
+    >>> _NO_Z
+    <required>
+    """
+
+    def __repr__(self) -> str:
+        return "<required>"
+
+
+_NO_Z = _Required()
 
 
 def sense(belief: ArrayLike, world: ArrayLike, measurement=_NO_Z, p_hit: float | None = None,

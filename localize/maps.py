@@ -5,6 +5,15 @@
 * :func:`symmetric_room` — a near-symmetric hall that fools a localizer.
 * :func:`random_rooms` — random box worlds for tests and benchmarks.
 * :func:`benchmark_map` — the 800 x 800 map the speed targets refer to.
+* :func:`tile_world` — the 5 x 7 floor of coloured tiles of the histogram chapter.
+* :func:`city_world` — a city of coloured tiles in labelled districts (coarse-to-fine localization).
+* :func:`draw_box` — add a filled rectangle (a desk, a pillar) to an occupancy array.
+
+Every name of ``__all__`` is listed above:
+
+>>> import localize.maps as maps
+>>> all(f":func:`{name}`" in maps.__doc__ for name in maps.__all__)
+True
 """
 
 from __future__ import annotations

@@ -919,8 +919,21 @@ class OdometryMotion:
     to :func:`sample_odometry`. :class:`localize.mcl.MCL` takes any such
     callable as its ``motion``.
 
+    **Pass the alphas of your robot.** The default ``(0.005, 0.005, 0.01,
+    0.005)`` is a generic placeholder and is *not* the noise of the book's
+    simulated robot, :data:`localize.sim.DEFAULT_ODOMETRY_ALPHAS` ``= (0.02,
+    0.0005, 0.02, 0.0005)``: with the default, a filter would assume a quarter
+    of the simulated robot's rotation noise (``alpha1``) and ten times its
+    rotation-from-translation noise (``alpha2``). For a simulated run use
+    ``OdometryMotion(run.alphas)``, the alphas its odometry was drawn with (as
+    every chapter does); for a real robot, calibrate them (chapter 4,
+    exercise 3) and inflate them a little rather than trust them exactly.
+
     Examples
     --------
+    >>> from localize import sim
+    >>> OdometryMotion().alphas.tolist() == list(sim.DEFAULT_ODOMETRY_ALPHAS)   # the default is not the simulator's
+    False
     >>> move = OdometryMotion((0.0, 0.0, 0.0, 0.0))          # noise-free
     >>> p = move(np.zeros((2, 3)), ([0, 0, 0], [1, 0, 0]), np.random.default_rng(0))
     >>> p.round(6)

@@ -228,3 +228,84 @@ def test_no_volatile_output_stored(nb_path):
         if "remove-output" in tags and c["cell_type"] == "code":
             assert not c.get("outputs"), f"{nb_path.name} cell {k}: remove-output cell stores output"
             assert "nbval-ignore-output" in tags, f"{nb_path.name} cell {k}: tag it nbval-ignore-output too"
+
+
+# --- characters and cell kinds that render wrongly ------------------------------------------------
+
+# A control character in a cell's source is always a mistake. The one that happens: a Python string
+# without the r prefix turns "\tfrac" into TAB + "frac" and "\big" into BACKSPACE + "ig", and the
+# formula renders broken. TAB is refused too, also in code: the project indents with spaces (ruff),
+# and a tab wanted inside a string is written as the escape "\t", not as the character itself.
+CONTROL = re.compile(r"[\x00-\x09\x0b-\x1f\x7f]")       # every C0 control and DEL except "\n"
+SOURCES = NOTEBOOKS + sorted((BOOK / "homework").glob("*.ipynb"))
+
+
+def _control_characters(text: str) -> list[str]:
+    """Each control character of ``text`` with its line number and the text around it."""
+    found = []
+    for m in CONTROL.finditer(text):
+        line = text.count("\n", 0, m.start()) + 1
+        found.append(f"line {line}: {m.group()!r} in {text[max(0, m.start() - 25):m.end() + 15]!r}")
+    return found
+
+
+def test_the_control_character_check_catches_an_unescaped_tfrac():
+    assert _control_characters("$\tfrac12$ and $\\big($")[0].startswith("line 1: '\\t'")
+    assert len(_control_characters("a \\tfrac\n\\big\r\n")) == 1            # only the \r
+    assert not _control_characters("$\\tfrac12 \\big($\n    indented with spaces\n")
+
+
+@pytest.mark.parametrize("nb_path", SOURCES, ids=lambda p: p.name)
+def test_no_control_characters_in_notebook_or_twin(nb_path):
+    """No cell source (notebook) and no line of the twin holds a TAB, BACKSPACE or other control character."""
+    bad = []
+    for k, cell in enumerate(json.loads(nb_path.read_text())["cells"]):
+        bad += [f"{nb_path.name} cell {k} ({cell['cell_type']}) {hit}"
+                for hit in _control_characters("".join(cell["source"]))]
+    twins = [_twin(nb_path)] if nb_path.parent == BOOK else sorted(nb_path.parent.glob("*.py"))
+    for py in twins:
+        bad += [f"{py.relative_to(ROOT)} {hit}" for hit in _control_characters(py.read_text())]
+    assert not bad, ("control characters (a LaTeX backslash read as an escape: write \\\\tfrac or use a raw "
+                     "string; indent with spaces):\n" + "\n".join(bad))
+
+
+# A code cell holding prose: jupytext makes a code cell of a "# %%" block, so a lost "[markdown]"
+# marker turns a section (its heading and its formulas) into Python comments that the reader sees as
+# code. Caught: a code cell whose every line is a comment, and any comment shaped like a markdown
+# heading ("# ## Title") or a display formula ("# $$ ... $$").
+PROSE_IN_COMMENT = re.compile(r"^\s*#\s?(#{1,6}\s+\S|\$\$)")
+
+
+def _prose_in_code(source: str) -> str | None:
+    """Why a code cell's source looks like markdown that lost its marker (None if it does not)."""
+    lines = [line for line in source.splitlines() if line.strip()]
+    if lines and all(line.lstrip().startswith("#") for line in lines):
+        return f"every line is a comment: {lines[0]!r}"
+    for line in lines:
+        if PROSE_IN_COMMENT.match(line):
+            return f"a markdown heading or formula as a comment: {line.strip()!r}"
+    return None
+
+
+def test_the_prose_in_code_check():
+    assert _prose_in_code("# ## KLD-sampling\n#\n# text")                    # only comments
+    assert _prose_in_code("fig\n#\n# ## KLD-sampling: as many as needed\n# text")
+    assert _prose_in_code("x = 1\n# $$ n(k) = k $$")
+    assert _prose_in_code("# Solution\nx = 1  # the # count\n# #1 is the first") is None
+    assert _prose_in_code("# the next lines draw\nplt.show()") is None
+
+
+KNOWN_PROSE_IN_CODE = {
+    "08_mcl_failures.ipynb": "ch8 cell 16: the KLD-sampling introduction (heading and n(k) formula) is a "
+                             "comment block in a code cell; the lead fixes its markdown marker with the new run loop",
+}
+
+
+@pytest.mark.parametrize("nb_path", [
+    pytest.param(p, marks=pytest.mark.xfail(strict=True, reason=KNOWN_PROSE_IN_CODE[p.name]))
+    if p.name in KNOWN_PROSE_IN_CODE else p for p in NOTEBOOKS], ids=lambda p: p.name)
+def test_no_markdown_stored_as_comments_in_a_code_cell(nb_path):
+    bad = [f"cell {k}: {why}" for k, c in enumerate(nbformat.read(nb_path, as_version=4).cells)
+           if c.cell_type == "code" and (why := _prose_in_code(c.source))]
+    assert not bad, (f"{nb_path.name}: markdown in a code cell (a missing '# %% [markdown]' marker in "
+                     f"{_twin(nb_path).relative_to(ROOT)}?):\n" + "\n".join(bad))

@@ -237,3 +237,18 @@ def test_coarsen_keeps_thin_walls_and_unknown():
         coarsen(OccupancyGrid(d, 0.1), 0)
     with pytest.raises(ValueError, match="larger than the map"):
         coarsen(OccupancyGrid(d, 0.1), 7)
+
+
+def test_beams_sharing_a_heading_bin_are_reported():
+    """180 one-degree beams on 36 ten-degree bins use 19 directions: the constructor warns and says how many."""
+    g = OccupancyGrid(np.zeros((6, 6)), 0.5)
+    half_circle = np.radians(np.arange(-90, 90, 1.0))
+    with pytest.warns(UserWarning, match=r"180 distinct beam angles snap onto 19 heading bins of 10 degrees"):
+        loc = GridLocalizer(g, 36, half_circle, 5.0, expected=np.ones((36, 6, 6)))
+    assert sum(loc.beams_per_bin.values()) == 180 and max(loc.beams_per_bin.values()) in (10, 11)   # 11: both ends
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")             # one beam per bin: silent
+        one_each = GridLocalizer(g, 36, half_circle[::10], 5.0, expected=np.ones((36, 6, 6)))
+    assert set(one_each.beams_per_bin.values()) == {1}

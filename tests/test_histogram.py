@@ -153,3 +153,18 @@ def test_all_zero_likelihood_reported(world):
         h.sense(b, world, "blue", 1.0, 0.0)
     with pytest.raises(db.ZeroLikelihoodError):
         h.sense_readable(b, world, "blue", 1.0, 0.0)
+
+
+def test_sense_signature_reads_well_in_help():
+    """help(histogram.sense) shows the reading as required, not as an object's memory address."""
+    import inspect
+    import pydoc
+
+    sig = str(inspect.signature(h.sense))
+    assert "object at" not in sig and "measurement=<required>" in sig and "z=<required>" in sig, sig
+    assert "object at 0x" not in pydoc.render_doc(h.sense, renderer=pydoc.plaintext)
+    world = np.array([["green", "blue"]])
+    with pytest.raises(TypeError, match="needs the reading"):
+        h.sense(np.full((1, 2), 0.5), world, p_hit=0.8, p_miss=0.2)
+    with pytest.raises(TypeError, match="twice"):
+        h.sense(np.full((1, 2), 0.5), world, "blue", 0.8, 0.2, z="blue")

@@ -246,8 +246,15 @@ from localize.widgets.maps import robot_on_map, robot_on_map_figure  # noqa: E40
 
 robot_on_map(office, x=10.0, y=5.5, theta_deg=20.0)
 
+# %% [markdown]
+# Without a running kernel the sliders cannot move, so here is what they show
+# for another pose: the robot carried into the room at the bottom left, onto
+# the desk, and turned to 135°. Its frame turns with it (forward now points
+# up and to the left), and the title warns that the pose is not in free space.
+
 # %%
-fig = robot_on_map_figure(office, 10.0, 5.5, 20.0)
+fig = robot_on_map_figure(office, 4.8, 2.8, 135.0)
+print(fig.axes[0].get_title())
 plt.show()
 
 # %% [markdown]

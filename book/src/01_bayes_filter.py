@@ -119,7 +119,13 @@ assert np.isclose(unnormalised.sum(), 0.325)
 # Because the motion noise is the same everywhere, $p(x \mid u, x')$ depends only
 # on the displacement $x - x'$. The sum is then a **convolution** of the belief
 # with the noise **kernel** `[0.1, 0.8, 0.1]`, after a shift by the commanded
-# one cell. `discrete.predict(belief, kernel, offset)` does exactly this;
+# one cell. The kernel reads from short to long: its middle entry is the
+# commanded move, its **first** entry the undershoot (one cell short, here
+# staying put) and its **last** entry the overshoot (one cell too far). This
+# kernel is symmetric, so the order does not show; a lopsided one such as
+# `[0.1, 0.6, 0.3]` (overshoots three times as often as it undershoots) must
+# be written in this order, and `discrete.predict` shifts the extra mass to
+# the right. `discrete.predict(belief, kernel, offset)` does exactly this;
 # `discrete.predict_readable` does it with two loops, the way the sum reads, and
 # the tests check that both agree.
 
@@ -173,6 +179,8 @@ for t in range(15):
     print(f"t={t}: at cell {truth:2d}, reads {'door' if z else 'wall'};"
           f" most likely cell {int(belief.argmax()):2d} with p = {belief.max():.3f}")
 
+print("t=2: belief at the three doors", {int(d): round(float(history[2][2][d]), 3) for d in (2, 5, 13)})
+
 fig, axes = plt.subplots(4, 1, figsize=(7, 7), sharex=True)
 for ax, t in zip(axes, [0, 2, 5, 14]):
     tr, z, b = history[t]
@@ -182,7 +190,12 @@ fig.tight_layout()
 plt.show()
 
 # %% [markdown]
-# After the first door ($t = 2$) three places are equally likely. After the
+# After the first door ($t = 2$) the three doors are the likely places, but
+# not equally likely: doors 2 and 13 hold 0.230 each, door 5 only 0.194
+# (printed above the figure). A robot now at door 5 that undershot or
+# overshot once would have stood on door 2 when it read "wall", a reading a
+# door gives only one time in ten; the walls before doors 2 and 13 leave no
+# such doubt. After the
 # second ($t = 5$) the gap between the doors, two walls, has ruled out most of
 # them, and by $t = 14$, past the third door, one place in the hallway explains
 # everything the robot has seen: the belief has a single tall peak at the true

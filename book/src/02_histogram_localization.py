@@ -41,7 +41,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import localize
-from localize import discrete, histogram
+from localize import check, discrete, histogram
 from localize.maps import city_world, tile_world
 from localize.multiscale import MultiScaleLocalizer, SingleScaleLocalizer, simulate_readings
 from localize.plot.histogram import draw_heat, draw_tiles
@@ -80,8 +80,7 @@ plt.show()
 #
 # Bayes rule on every tile: multiply the five blue tiles by 0.85, the other 30
 # by 0.15, and divide by the total $5 \cdot 0.85/35 + 30 \cdot 0.15/35 = 0.25$.
-# `histogram.sense` does this; the values it gives are the first table of the
-# worked example this chapter follows.
+# `histogram.sense` does this.
 
 # %%
 belief = histogram.sense(belief, world, "blue", P_HIT, P_MISS)
@@ -127,102 +126,43 @@ assert np.all(belief[:, -1].round(3) == 0.001)
 
 # %% [markdown]
 # After one sense and one move, five tiles hold 0.106 and the belief has moved
-# with the robot. The worked example lists exactly these tables; our code
-# reproduces them to the printed digit.
+# with the robot.
 #
-# ## The next readings, and a map that fits them
+# ## The next readings
 #
-# The example goes on: the robot reads **green**, moves **up** and reads **red**,
-# and after these three readings one tile in the top row stands out. The example
-# only shows the tables, not the whole map, so we designed the colours of
-# `tile_world()` to agree with every table that can be matched. The blue tiles
-# follow from the first table, the green ones from the second (a tile is green
-# exactly where its value went *up* relative to its neighbours with the same
-# prior), and the red ones from the third.
+# The robot goes on: it reads **green**, moves **up** and reads **red**. (These
+# steps, and the colours of `tile_world()`, follow a worked example of a
+# localization tutorial; a footnote at the end of the chapter compares our
+# numbers with its printed tables.) First the green reading:
 
 # %%
 belief = histogram.sense(belief, world, "green", P_HIT, P_MISS)
-seed_green = np.array([
-    [.027, .027, .027, .005, .005, .005, .0001],
-    [.005, .005, .027, .154, .005, .005, .0001],
-    [.005, .005, .005, .154, .027, .005, .001],
-    [.005, .027, .027, .154, .005, .027, .001],
-    [.005, .027, .005, .027, .027, .154, .0001]])
+belief_green = belief.copy()                 # kept for the hand calculation below
 print(belief.round(4))
-diff = np.abs(belief - seed_green)
-print(f"largest difference to the printed table: {diff.max():.4f}")
-assert diff[:, :6].max() < 0.0015          # the 30 tiles that had a real prior: within 0.0015 of the printed digits
-assert np.isclose(belief[1, 3], 0.1554, atol=5e-5) and round(float(belief[1, 3]), 3) == 0.155  # printed as .154
-assert np.allclose(belief[[0, 1, 2], [6, 6, 6]], [0.0003, 0.0003, 0.0016], atol=5e-5)
+assert np.isclose(belief[1, 3], 0.1554, atol=5e-5) and np.isclose(belief[0, 0], 0.0274, atol=5e-5)
 
 # %% [markdown]
-# The 30 tiles that had a real prior agree with the printed table to within
-# 0.0015, but not all to its three digits: 0.0274 is printed as .027 (right),
-# 0.0048 as .005 (right), while 0.1554 — which rounds to .155 — is printed as
-# .154, one unit off in the last digit (the hand calculation must have rounded an
-# intermediate value). The rightmost column differs more: the table shows .0001
-# and .001 where Bayes rule gives 0.0003 and 0.0016 — the printed column was
-# rounded more coarsely. The pattern (which tiles are high, which low) is the
-# same.
-#
-# Now **move up** (again perfectly, with `fill = 0.001`) and read **red**:
+# The four tiles that held 0.106 (a former blue peak, now moved left) and are
+# green rise to 0.1554; the green tiles with a low prior rise to 0.0274; the
+# rightmost column, which held only the `fill`, stays near zero. Now **move
+# up** (again perfectly, with `fill = 0.001`) and read **red**:
 
 # %%
 belief = histogram.move(belief, "up", fill=0.001)
 belief = histogram.sense(belief, world, "red", P_HIT, P_MISS)
-seed_red = np.array([
-    [.002, .002, .014, .506, .014, .014, .0003],
-    [.014, .014, .014, .087, .014, .014, .003],
-    [.003, .016, .016, .089, .003, .016, .0008],
-    [.003, .016, .003, .003, .016, .089, .0001],
-    [.0001, .0001, .0001, .0001, .0001, .0001, .0001]])
+belief_red = belief.copy()                   # kept for the footnote
 print(belief.round(4))
 best = np.unravel_index(int(belief.argmax()), belief.shape)
-print("most likely tile:", tuple(int(i) for i in best), f"with {belief.max():.3f} (printed: .506)")
-far = np.argwhere(np.abs(belief - seed_red) > 0.004)
-print("tiles that differ from the printed table by more than 0.004:", [tuple(int(i) for i in f) for f in far])
-assert tuple(best) == (0, 3) and abs(belief.max() - 0.506) < 0.01
-assert [tuple(int(i) for i in f) for f in far] == [(0, 3), (1, 2), (3, 3)] and round(belief.max(), 3) == 0.501
+print("most likely tile:", tuple(int(i) for i in best), f"with {belief.max():.3f}")
+assert tuple(best) == (0, 3) and round(float(belief.max()), 3) == 0.501
 
 # %% [markdown]
-# The conclusion is the same — the robot is at the top row, fourth tile, with
-# about half of all the belief — but this last table of the example cannot be
-# matched everywhere by *any* colouring, because it is **internally
-# inconsistent**. To see why, put the printed table next to the prior it was
-# computed from, which is the printed green table moved up one row:
+# After three readings and two moves the robot is found: the top row, fourth
+# tile, holds half of all the belief (0.501), the next best tiles 0.0885.
 
 # %%
-prior_printed = np.vstack([seed_green[1:], np.full((1, 7), np.nan)])   # the bottom row comes from `fill`
-print("prior (printed green table moved up; bottom row: fill, not stated):\n", prior_printed)
-print("printed table after reading red:\n", seed_red)
-assert prior_printed[1, 2] == 0.005 and seed_red[1, 2] == 0.014            # (1, 2): rose like a red tile
-assert seed_green[1, 2] == 0.027                                            # ... but rose on green before
-assert prior_printed[3, 3] == 0.027 and seed_red[3, 3] == 0.003             # (3, 3): fell below any Bayes answer
-assert tuple(seed_red[0:2, 4]) == (0.014, 0.014) and seed_red[1, 3] == 0.087  # rows 0-1: .014 and .087 ...
-assert (seed_red[2, 1], seed_red[2, 3]) == (0.016, 0.089)                   # ... rows 2-3: .016 and .089
-
-# %% [markdown]
-# * tile (1, 2) would have to be red (its value rose from .005 to .014 like the
-#   other red tiles) although the previous table made it green (its value rose
-#   from .019 to .027 on reading green); a tile cannot be both. We kept it green.
-# * tile (3, 3) has prior .027 (after moving up it holds the old (4, 3)) but
-#   posterior .003; whatever its colour, Bayes rule gives .016 (not red) or .089
-#   (red).
-# * the rows do not share one normaliser: rows 0-1 print .014 and .087 where rows
-#   2-3 print .016 and .089 for the same prior and reading.
-# * the bottom row (.0001 everywhere) and (2, 6) (.0008) depend on a fill value the
-#   example does not state.
-#
-# Apart from (1, 2) and (3, 3), and the peak (0.501 against .506, because of
-# the different normaliser), our numbers match the table to its rounding.
-# Worked examples done by hand are easy to get slightly wrong; one purpose of
-# running them as code is to find out where.
-
-# %%
-fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
-draw_tiles(world, seed_red, axes[0], digits=4, title="printed table (after blue, left, green, up, red)")
-draw_tiles(world, belief, axes[1], digits=4, truth=(0, 3), title="computed by localize (true tile circled)")
-fig.tight_layout()
+fig, ax = plt.subplots(figsize=(5.6, 3.6))
+draw_tiles(world, belief, ax, digits=4, truth=(0, 3), title="after blue, left, green, up, red (true tile circled)")
 plt.show()
 
 # %% [markdown]
@@ -247,26 +187,25 @@ for name in ["up", "left", "down", "right"]:
 # %% [markdown]
 # ### Checking a hand calculation
 #
-# Take the belief after reading green (the second printed table) and let the
+# Take the belief after reading green (printed above) and let the
 # robot move **left** with this model. Which tiles can the robot have come from to
 # land on tile (2, 4)? From (2, 5), the tile to its right, by moving as intended
 # (0.5); from (1, 5), above-right, by slipping down-left (0.2); from (3, 5),
 # below-right, by slipping up-left (0.2); and from (2, 4) itself by not moving
-# (0.1). With the printed values .005, .005, .027 and .027 at those tiles:
+# (0.1). With the values 0.0048, 0.0048, 0.0274 and 0.0274 at those tiles:
 #
-# $$ 0.2 \cdot 0.005 + 0.5 \cdot 0.005 + 0.2 \cdot 0.027 + 0.1 \cdot 0.027 = 0.0116 .$$
+# $$ 0.2 \cdot 0.0048 + 0.5 \cdot 0.0048 + 0.2 \cdot 0.0274 + 0.1 \cdot 0.0274 = 0.0116 .$$
 #
-# The same number comes out of `histogram.move` (the printed table does not sum
-# exactly to one, being rounded, so we normalise it, move without normalising,
-# and scale back), and out of the loop version `move_readable` that pushes each
-# tile's belief to the tiles it can reach:
+# The same number comes out of `histogram.move` (without normalising, so that
+# we see the sum itself), and out of the loop version `move_readable` that
+# pushes each tile's belief to the tiles it can reach:
 
 # %%
 k_left = histogram.noisy_step_kernel("left")
-total = seed_green.sum()
-raw = histogram.move(seed_green / total, "left", k_left, normalize=False) * total
-raw_loops = histogram.move_readable(seed_green / total, "left", k_left, normalize=False) * total
-by_hand = 0.2 * 0.005 + 0.5 * 0.005 + 0.2 * 0.027 + 0.1 * 0.027
+print("belief at (1, 5), (2, 5), (3, 5), (2, 4):", belief_green[[1, 2, 3, 2], [5, 5, 5, 4]].round(4))
+raw = histogram.move(belief_green, "left", k_left, normalize=False)
+raw_loops = histogram.move_readable(belief_green, "left", k_left, normalize=False)
+by_hand = 0.2 * 0.0048 + 0.5 * 0.0048 + 0.2 * 0.0274 + 0.1 * 0.0274
 print(f"by hand {by_hand:.4f}   move() {raw[2, 4]:.4f}   move_readable() {raw_loops[2, 4]:.4f}")
 assert round(by_hand, 4) == round(float(raw[2, 4]), 4) == round(float(raw_loops[2, 4]), 4) == 0.0116
 
@@ -283,10 +222,13 @@ assert round(by_hand, 4) == round(float(raw[2, 4]), 4) == round(float(raw_loops[
 # With the noisy model the belief spreads more after each move, and more readings
 # are needed before one tile stands out. Use the widget below: the slider
 # *motion noise* is the chance of not reaching the intended tile (0.5 is the model
-# above), *sensor right* is `p_hit` (with `p_miss = 1 - p_hit`), and the button
-# performs one sense-and-move cycle along a fixed path whose first three readings
-# are blue, green and red. The true tile is circled. (In the HTML book the
-# figure after the widget shows three cycles with the noisy model.)
+# above), *sensor right* is `p_hit` (with `p_miss = 1 - p_hit`), and each press
+# of the button *next cycle* ends on a reading, as the worked example does: the
+# first press reads the colour under the robot, every later one moves the robot
+# one tile along a fixed path and then reads. The first three cycles are the
+# worked example (blue, left, green, up, red), so with the motion noise at 0
+# the third shows its final table. The true tile is circled. (In the HTML book
+# the figure after the widget shows three cycles with the noisy model.)
 
 # %% tags=["nbval-ignore-output"]
 from localize.widgets.histogram import TILE_PATH, tile_world_app, tile_world_figure, tile_world_run  # noqa: E402
@@ -377,6 +319,16 @@ print(f"cell updates: full grid {single.cells_updated:,}, multi-scale {multi.cel
 assert multi.estimate() == single.estimate() == tuple(int(v) for v in pos)
 assert round(single.cells_updated / multi.cells_updated) == 100             # "about a hundredth of the work"
 
+
+def localized_from(errors):
+    """The first step (1-based) from which the estimate stays on the true tile."""
+    wrong = np.flatnonzero(np.asarray(errors) > 0)
+    return int(wrong[-1]) + 2 if len(wrong) else 1
+
+
+found_single, found_multi = localized_from(err_single), localized_from(err_multi)
+print(f"on the true tile for good from step {found_single} (full grid) and step {found_multi} (coarse to fine)")
+
 # %%
 fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
 steps = np.arange(1, len(moves) + 1)
@@ -387,23 +339,36 @@ axes[0].text(multi.switched_at + 3, 0.8, "switch to\nfine phase", fontsize=8, tr
 axes[0].set_xlabel("step")
 axes[0].set_ylabel("error of the estimate [tiles, max norm]")
 axes[0].legend()
-cost_single = np.full(len(moves), fine.size)
-axes[1].semilogy(steps, cost_single, label="full grid")
-axes[1].semilogy(steps, np.where(steps <= multi.switched_at + 1, coarse.size, multi.belief.size), "--",
-                 label="coarse to fine")
+# right: the work done so far; each filter's dot marks the step from which it stays on the true tile
+per_step = {"full grid": np.full(len(moves), fine.size),
+            "coarse to fine": np.where(steps <= multi.switched_at + 1, coarse.size, multi.belief.size)}
+assert per_step["coarse to fine"].sum() == multi.cells_updated and per_step["full grid"].sum() == single.cells_updated
+for (name, cost), found, ls in zip(per_step.items(), (found_single, found_multi), ("-", "--")):
+    total = np.cumsum(cost)
+    line, = axes[1].semilogy(steps, total, ls, label=name)
+    axes[1].plot(found, total[found - 1], "o", color=line.get_color())
+    print(f"{name}: {total[found - 1]:,} cell updates by step {found}")
+    axes[1].annotate(f"on the true tile from step {found}\n{total[found - 1]:,} cell updates so far",
+                     (found, total[found - 1]), xytext=(8, -24),
+                     textcoords="offset points", fontsize=8, color=line.get_color())
 axes[1].set_xlabel("step")
-axes[1].set_ylabel("cells updated per step")
-axes[1].set_ylim(100, 3e5)
+axes[1].set_ylabel("cell updates so far (log scale)")
+axes[1].set_ylim(5e2, 5e7)
+assert np.cumsum(per_step["coarse to fine"])[found_multi - 1] < 0.1 * np.cumsum(per_step["full grid"])[found_single - 1]
 axes[1].legend()
 fig.tight_layout()
 plt.show()
 
 # %% [markdown]
-# Both filters end on the true tile. Before the switch the coarse filter can only
-# name a block (its error is up to half a block plus the spread of the belief);
-# after it, the fine filter finds the exact tile within a few steps, and from then
-# on the two filters agree. The multi-scale filter did about a hundredth of the
-# work. The price is a risk: if the coarse phase picks the wrong window, the fine
+# Both filters end on the true tile, but not at the same time. The full grid,
+# which uses every tile's colour from the start, is on the true tile for good
+# from step 11. The coarse filter can only name a block (its error is up to
+# half a block plus the spread of the belief) until it switches after step
+# 53; the fine filter then needs a few more steps, and coarse to fine is on
+# the true tile from step 62. From then on the two filters agree. Over the
+# whole drive the multi-scale filter did about a hundredth of the work; even
+# by the step at which it localized, it had done less than a tenth of what the
+# full grid had spent by step 11 (the dots on the right). The price is a risk: if the coarse phase picks the wrong window, the fine
 # filter cannot find the robot, because it never looks outside. A safe threshold,
 # and a fallback to the coarse phase when the fine belief's likelihoods collapse,
 # are the usual answers (an exercise below measures the risk).
@@ -457,7 +422,15 @@ plt.show()
 #    than others. Write `sense_confusion(belief, world, z, confusion)` where
 #    `confusion[a][b]` is the probability of reading `b` on a tile of colour `a`,
 #    and check that it equals `histogram.sense` when the confusion matrix has
-#    `p_hit` on the diagonal and `p_miss` elsewhere.
+#    `p_hit` on the diagonal and `p_miss` elsewhere. **Self-check:** wrap it
+#    as `fn(belief, world, z, p_hit, p_miss)` (build that diagonal matrix over
+#    `np.unique(world)` inside) and run `localize.check.histogram_sense(fn)`
+#    (the homework's check of section 3). The diagonal matrix cannot tell
+#    `confusion[a][b]` from `confusion[b][a]`, so check one lopsided case by
+#    hand too: in the world `[[red, green]]` with a uniform belief, a sensor
+#    that reads *green* on a red tile with probability 0.3 and on a green tile
+#    with probability 0.9 must give the belief `[0.25, 0.75]` after reading
+#    *green*.
 # 3. **Experiment.** Run the coarse-to-fine localizer on 20 random cities
 #    (different seeds) with switching thresholds 0.5, 0.8 and 0.95. How often
 #    does it end on the true tile, and how many cell updates does it use,
@@ -496,6 +469,18 @@ u = discrete.uniform(world.shape)
 assert np.allclose(sense_confusion(u, world, "blue", conf), histogram.sense(u, world, "blue", 0.85, 0.15))
 print("sense_confusion agrees with histogram.sense")
 
+
+def sense_diagonal(belief, world, z, p_hit, p_miss):
+    """histogram.sense's signature, through a diagonal confusion matrix."""
+    colours = np.unique(world)
+    return sense_confusion(belief, world, z, {a: {b: p_hit if a == b else p_miss for b in colours} for a in colours})
+
+
+print(check.histogram_sense(sense_diagonal))
+lopsided = {"red": {"red": 0.7, "green": 0.3}, "green": {"red": 0.1, "green": 0.9}}
+two = np.array([["red", "green"]])
+print("lopsided case:", sense_confusion(discrete.uniform(two.shape), two, "green", lopsided).round(4))
+
 # %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
 # Exercise 3
@@ -528,6 +513,90 @@ for threshold in [0.5, 0.8, 0.95]:
 # </details>
 
 # %% [markdown]
+# ## Footnote: the published tables
+#
+# The tile-world steps follow a worked example of a localization tutorial
+# among this book's source texts, which prints the belief after each step
+# but not the map. We designed the colours of `tile_world()` to agree with
+# every table that can be matched: the blue tiles follow from the first table,
+# the green ones from the second (a tile is green exactly where its value went
+# *up* relative to its neighbours with the same prior), the red ones from the
+# third. The first two tables (after blue, and after the move left) agree
+# with ours to their printed digit. The other two do not quite, and working
+# out why is a lesson in checking hand calculations. Here are the printed
+# tables after green and after red, beside ours:
+
+# %%
+seed_green = np.array([
+    [.027, .027, .027, .005, .005, .005, .0001],
+    [.005, .005, .027, .154, .005, .005, .0001],
+    [.005, .005, .005, .154, .027, .005, .001],
+    [.005, .027, .027, .154, .005, .027, .001],
+    [.005, .027, .005, .027, .027, .154, .0001]])
+seed_red = np.array([
+    [.002, .002, .014, .506, .014, .014, .0003],
+    [.014, .014, .014, .087, .014, .014, .003],
+    [.003, .016, .016, .089, .003, .016, .0008],
+    [.003, .016, .003, .003, .016, .089, .0001],
+    [.0001, .0001, .0001, .0001, .0001, .0001, .0001]])
+diff = np.abs(belief_green - seed_green)
+print(f"after green: largest difference to the printed table {diff.max():.4f}")
+assert diff[:, :6].max() < 0.0015          # the 30 tiles that had a real prior: within 0.0015 of the printed digits
+assert round(float(belief_green[1, 3]), 3) == 0.155                            # printed as .154
+assert np.allclose(belief_green[[0, 1, 2], [6, 6, 6]], [0.0003, 0.0003, 0.0016], atol=5e-5)
+far = np.argwhere(np.abs(belief_red - seed_red) > 0.004)
+print("after red: tiles that differ from the printed table by more than 0.004:",
+      [tuple(int(i) for i in f) for f in far], f"; peak {belief_red.max():.3f} (printed .506)")
+assert [tuple(int(i) for i in f) for f in far] == [(0, 3), (1, 2), (3, 3)]
+
+# %% [markdown]
+# After green, the 30 tiles that had a real prior agree with the printed table
+# to within 0.0015: 0.0274 is printed as .027 and 0.0048 as .005 (right),
+# while 0.1554, which rounds to .155, is printed as .154 (the hand calculation
+# must have rounded an intermediate value). The rightmost column shows .0001
+# and .001 where Bayes rule gives 0.0003 and 0.0016: it was rounded more
+# coarsely.
+#
+# The table after red cannot be matched everywhere by *any* colouring,
+# because it is **internally inconsistent**. Put it next to the prior it was
+# computed from, the printed green table moved up one row:
+
+# %%
+prior_printed = np.vstack([seed_green[1:], np.full((1, 7), np.nan)])   # the bottom row comes from `fill`
+print("prior (printed green table moved up; bottom row: fill, not stated):\n", prior_printed)
+print("printed table after reading red:\n", seed_red)
+assert prior_printed[1, 2] == 0.005 and seed_red[1, 2] == 0.014            # (1, 2): rose like a red tile
+assert seed_green[1, 2] == 0.027                                            # ... but rose on green before
+assert prior_printed[3, 3] == 0.027 and seed_red[3, 3] == 0.003             # (3, 3): fell below any Bayes answer
+assert tuple(seed_red[0:2, 4]) == (0.014, 0.014) and seed_red[1, 3] == 0.087  # rows 0-1: .014 and .087 ...
+assert (seed_red[2, 1], seed_red[2, 3]) == (0.016, 0.089)                   # ... rows 2-3: .016 and .089
+
+# %% [markdown]
+# * tile (1, 2) would have to be red (its value rose from .005 to .014 like the
+#   other red tiles) although the previous table made it green (its value rose
+#   from .019 to .027 on reading green); a tile cannot be both. We kept it green.
+# * tile (3, 3) has prior .027 (after moving up it holds the old (4, 3)) but
+#   posterior .003; whatever its colour, Bayes rule gives .016 (not red) or .089
+#   (red).
+# * the rows do not share one normaliser: rows 0-1 print .014 and .087 where rows
+#   2-3 print .016 and .089 for the same prior and reading.
+# * the bottom row (.0001 everywhere) and (2, 6) (.0008) depend on a fill value the
+#   example does not state.
+#
+# Apart from (1, 2) and (3, 3), and the peak (0.501 against .506, because of
+# the different normaliser), our numbers match the table to its rounding; the
+# conclusion, the top row's fourth tile, is the same. Worked examples done by
+# hand are easy to get slightly wrong; one purpose of running them as code is
+# to find out where.
+
+# %%
+fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+draw_tiles(world, seed_red, axes[0], digits=4, title="printed table (after blue, left, green, up, red)")
+draw_tiles(world, belief_red, axes[1], digits=4, truth=(0, 3), title="computed by localize (true tile circled)")
+fig.tight_layout()
+plt.show()
+
+# %% [markdown]
 # ## References
 #
 # * S. Thrun, W. Burgard, D. Fox. *Probabilistic Robotics*. MIT Press, 2005:
@@ -538,4 +607,5 @@ for threshold in [0.5, 0.8, 0.95]:
 # * D. Fox, W. Burgard, S. Thrun. Markov localization for mobile robots in
 #   dynamic environments. *Journal of Artificial Intelligence Research* 11, 1999.
 # * The coloured-tile example follows the structure of a localization tutorial
-#   among this book's source texts; the numbers are recomputed here.
+#   among this book's source texts; the numbers are recomputed here (see the
+#   footnote above).

@@ -161,12 +161,27 @@ assert 0.985 < mass_near < 0.999
 assert abs(cell_xy[i2, j2, 0] - 18.1) < 0.5 and abs(abs(np.degrees(loc.theta[k2])) - 180) < 10
 assert 0.001 < loc.marginal_xy()[east].sum() < 0.01
 
-fig, ax = plt.subplots(figsize=(9, 5.2))
-draw_map(grid, ax, alpha=0.5)
+# left: the whole office on a log colour scale, so that the faint mirror candidate shows;
+# right: the 2 m around the start on a linear scale. The truth is a ring, so it hides no cell.
 m = loc.marginal_xy()
-ax.imshow(np.ma.masked_less(m / m.max(), 1e-3), origin="lower", extent=grid.extent, cmap="viridis", alpha=0.9)
-ax.plot(*truth[0, :2], "r+", ms=14, mew=2)
-ax.set_title("belief over (x, y) after the first scan (summed over headings); red cross: truth")
+fig, axes = plt.subplots(1, 2, figsize=(11, 3.9), width_ratios=(2.2, 1), layout="constrained")
+draw_map(grid, axes[0], alpha=0.35)
+img = axes[0].imshow(np.ma.masked_where(m < 1e-5, np.log10(np.maximum(m, 1e-5))), origin="lower", extent=grid.extent,
+                     cmap="viridis", vmin=-5, vmax=0)
+fig.colorbar(img, ax=axes[0], label="log10 of the belief per 20 cm cell", shrink=0.85)
+axes[0].annotate(f"mirror candidate: {m[east].sum():.1%} of the belief", (cell_xy[i2, j2, 0], cell_xy[i2, j2, 1]),
+                 xytext=(12.0, 8.0), fontsize=8, arrowprops=dict(arrowstyle="->", color="k"))
+axes[0].set_title("after the first scan: belief over (x, y), summed over headings", fontsize=9)
+draw_map(grid, axes[1], alpha=0.35)
+img = axes[1].imshow(np.ma.masked_less(m, 1e-4), origin="lower", extent=grid.extent, cmap="viridis", vmin=0)
+fig.colorbar(img, ax=axes[1], label="belief per cell", shrink=0.85)
+axes[1].set_xlim(truth[0, 0] - 1, truth[0, 0] + 1)
+axes[1].set_ylim(truth[0, 1] - 1, truth[0, 1] + 1)
+axes[1].set_title("zoom on the start (linear scale)", fontsize=9)
+for ax in axes:
+    ax.plot(*truth[0, :2], "o", ms=12, mfc="none", mec="tab:red", mew=2, label="truth")
+    ax.set_xlabel("x [m]")
+axes[0].legend(loc="lower right", fontsize=8)
 plt.show()
 
 # %% [markdown]
@@ -176,8 +191,8 @@ plt.show()
 # noise: a faint **second candidate** sits at the other end of the corridor,
 # near x = 18 m, facing back (180°). The corridor's two ends look almost alike
 # from inside, so the mirror pose explains the twelve ranges nearly as well,
-# and it holds about half a percent of the belief (the small bright spot at the
-# right of the figure). The next steps, as the robot drives towards the middle,
+# and it holds about half a percent of the belief (the spot that the log
+# colour scale on the left brings out). The next steps, as the robot drives towards the middle,
 # tell the two apart. (That the first scan is so decisive is luck of the place: in the
 # middle of a long, plain corridor one scan would leave many candidates, and
 # the robot would have to drive before the belief settles, as in the hallway of
@@ -342,8 +357,10 @@ for (factor, n_head), (build, per_step) in zip(configs, timings):
     print(f"cell {0.05 * factor:.2f} m, {n_head} headings: table {build:.2f} s, predict + update {per_step * 1e3:.0f} ms")
 
 # %% [markdown]
-# Halving the cell size quarters the cells; doubling the headings doubles them
-# again, so the 10 cm grid has 150 times the bins of the 50 cm one. The error
+# Halving the cell size quadruples the number of cells; doubling the headings
+# doubles it again. From 50 cm and 12 headings to 10 cm and 72 headings the
+# cells are 5 times finer each way and the headings 6 times finer, so the 10 cm
+# grid has $25 \times 6 = 150$ times the bins of the 50 cm one. The error
 # falls roughly in proportion to the cell size (the estimate is a bin centre),
 # while the work grows with the cube of the resolution: from 50 cm to 10 cm the
 # position error drops by a factor of 3.6 and the work grows by 150. (A 200 x 200 x 72 grid, 2.9

@@ -61,6 +61,7 @@ import localize
 from localize import motion
 from localize.geometry import wrap_angle
 from localize.plot import draw_robot
+from localize.plot.ekf import covariance_ellipse
 from localize.plot.motion import (
     PR_FIG_5_9_ALPHAS,
     banana_figure,
@@ -113,8 +114,10 @@ ax.set_title("500 draws of 'drive 1 m' ($\\sigma_d$ = 5 cm, $\\sigma_\\theta$ = 
 plt.show()
 
 # %% [markdown]
-# The cloud is a thin arc: heading noise moves the robot sideways, distance
-# noise moves it along. Two random numbers per draw decide three coordinates,
+# The cloud is an ellipse about twice as wide as it is long (standard
+# deviations 0.1 m sideways and 0.05 m along, printed above), bent a little
+# along the circle of radius 1 m around the start: heading noise moves the
+# robot sideways, distance noise moves it along. Two random numbers per draw decide three coordinates,
 # so the samples lie on a two-dimensional surface in $(x, y, \theta)$ space:
 # the heading is always exactly the direction of travel (the last line
 # printed above). A real robot can end up facing a little to the side of the
@@ -222,15 +225,16 @@ assert np.allclose(slow, fast)
 # them. Both rest on the central limit theorem in miniature: a sum of
 # independent uniforms is already bell-shaped.
 #
-# * **Normal, variance $b^2$:** $	frac12 \sum_{i=1}^{12} \mathrm{rand}(-b, b)$.
+# * **Normal, variance $b^2$:** $\tfrac12 \sum_{i=1}^{12} \mathrm{rand}(-b, b)$.
 #   One uniform on $[-b, b]$ has variance $b^2/3$; twelve have $4b^2$, and
 #   halving divides the variance by four.
-# * **Triangular, variance $b^2$:** $	frac{\sqrt 6}{2}\,ig(\mathrm{rand}(-b, b) + \mathrm{rand}(-b, b)ig)$.
+# * **Triangular, variance $b^2$:** $\tfrac{\sqrt 6}{2}\,\big(\mathrm{rand}(-b, b) + \mathrm{rand}(-b, b)\big)$.
 #   Two uniforms give a tent on $[-2b, 2b]$ with variance $2b^2/3$; the factor
 #   $\sqrt6/2$ scales it to $b^2$ and to the support $[-\sqrt6 b, \sqrt6 b]$.
 #
 # They are approximations with visible limits: the twelve-uniform "normal" can
-# never go beyond $6b$ (a true normal does, once in $10^9$ draws) and its tails
+# never go beyond $6b$ (a true normal does, about twice in $10^9$ draws:
+# $P(|Z| > 6) = 2.0 \times 10^{-9}$, printed below) and its tails
 # are a little thin; the triangular distribution has no tails at all, which is
 # why it is occasionally used on purpose, as a cheap noise that cannot produce
 # outliers. Neither is faster than numpy's generator, which draws one number
@@ -242,6 +246,7 @@ b_sd, n_u = 0.1, 200_000
 normal_12 = 0.5 * rng_u.uniform(-b_sd, b_sd, (n_u, 12)).sum(axis=1)
 triangular = np.sqrt(6) / 2 * rng_u.uniform(-b_sd, b_sd, (n_u, 2)).sum(axis=1)
 numpy_normal = b_sd * rng_u.standard_normal(n_u)
+print(f"a true normal beyond 6 standard deviations: P(|Z| > 6) = {math.erfc(6 / math.sqrt(2)):.1e}")
 print("                    std     kurtosis  largest |value| / b")
 for name, v in [("12 uniforms", normal_12), ("triangular", triangular), ("numpy normal", numpy_normal)]:
     kurt = np.mean((v - v.mean()) ** 4) / v.var() ** 2
@@ -532,7 +537,9 @@ for w in [0.5, 1e-4, 1e-9, 0.0]:
 # exact in both cases.
 #
 # Here are velocity-model samples with and without the final rotation. On
-# the right we plot, for each sample, its heading against the heading that
+# the left, their positions: $\gamma$ turns the robot where it stands, so
+# both clouds have the same spread and their $2\sigma$ ellipses nearly
+# coincide; the final rotation is invisible in $(x, y)$. On the right we plot, for each sample, its heading against the heading that
 # its position implies (twice the chord angle): without $\gamma$ all points
 # sit on the diagonal.
 
@@ -541,13 +548,19 @@ a_vel = np.array([0.02, 0.01, 0.02, 0.02, 0.01, 0.02])
 with_g = motion.sample_velocity(np.zeros((500, 3)), (1.0, 0.8), 1.0, a_vel, rng)
 without_g = motion.sample_velocity(np.zeros((500, 3)), (1.0, 0.8), 1.0, a_vel * [1, 1, 1, 1, 0, 0], rng)
 fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), layout="constrained")
-draw_samples(with_g, ax=axes[0], color="tab:red")
-draw_samples(without_g, ax=axes[0], color="tab:blue")
+# left: gamma only turns the robot where it stands, so both position clouds have the same spread;
+# their 2-sigma ellipses (dashed for "without") nearly coincide
+for s, c, ls in ((with_g, "tab:red", "-"), (without_g, "tab:blue", "--")):
+    axes[0].scatter(s[:, 0], s[:, 1], s=3, color=c, alpha=0.35)
+    covariance_ellipse(s.mean(axis=0), np.cov(s.T), ax=axes[0], color=c, ls=ls, lw=2)
 t = np.linspace(0, 1, 40)
 arc = motion.move_velocity(np.zeros((40, 3)), 1.0 * t, 0.8 * t, 1.0)
 axes[0].plot(arc[:, 0], arc[:, 1], "k--", lw=1)
 axes[0].set_aspect("equal")
-axes[0].set_title("samples: red with $\\gamma$, blue without", fontsize=9)
+axes[0].set_xlabel("x [m]")
+axes[0].set_ylabel("y [m]")
+axes[0].set_title("positions: red with $\\gamma$, blue without (2σ ellipses)", fontsize=9)
+axes[1].set_title("headings: only $\\gamma$ lets them leave the diagonal", fontsize=9)
 for s, c in ((with_g, "tab:red"), (without_g, "tab:blue")):
     implied = 2 * np.arctan2(s[:, 1], s[:, 0])
     axes[1].scatter(implied, s[:, 2], s=3, color=c, alpha=0.5)
@@ -737,7 +750,19 @@ velocity_cloud_figure()
 #    not look at, `rng_robot` below) drives 1 m straight 200 times and turns
 #    $90°$ on the spot 200 times; you observe its true end poses. Estimate
 #    $\alpha_1$ and $\alpha_3$ from the spread of the end poses, and compare
-#    with the hidden values.
+#    with the hidden values. (Harder: the same 400 end poses also give
+#    $\alpha_2$ and $\alpha_4$.)
+#
+# **Checking yourself.** Exercise 1: `motion.odometry_to_control`,
+# `motion.odometry_variances` and `motion.odometry_pdf` compute (a), (b) and (c)
+# (after you did them by hand). Exercise 2 checks itself: the two means must
+# agree within a few standard errors ($\sigma/\sqrt{10^5}$, a few tenths of a
+# millimetre) and the covariances to about $10^{-4}$. Exercise 3: the hidden
+# values are in the solution; an estimate from 200 runs is good when within
+# about 30 % (three relative standard errors of $\sqrt{2/200} = 10\%$). The
+# homework (`book/homework/homework.ipynb`, section 4, "The odometry motion model") has you
+# write PR table 5.6's sampler and table 5.5's density, and checks them with
+# `localize.check.sample_odometry(fn)` and `localize.check.odometry_pdf(fn)`.
 
 # %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
@@ -816,8 +841,13 @@ spin = motion.sample_odometry(np.zeros((200, 3)), ((0, 0, 0), (0, 0, np.pi / 2))
 alpha3_hat = np.var(np.hypot(straight[:, 0], straight[:, 1]))
 # on the spot: rot1 = 0, so only rot2 carries noise, with variance alpha1 * (pi/2)^2
 alpha1_hat = np.var(wrap_angle(spin[:, 2] - np.pi / 2)) / (np.pi / 2) ** 2
-print(f"alpha1: estimated {alpha1_hat:.4f}, hidden {hidden[0]}")
-print(f"alpha3: estimated {alpha3_hat:.4f}, hidden {hidden[2]}")
+# the same runs give the other two: driving straight, rot1 and rot2 each get variance alpha2 * 1^2,
+# so the final heading has variance 2 alpha2; on the spot the distance noise has variance
+# alpha4 * (pi/2)^2 around a distance of 0, so its mean square estimates it
+alpha2_hat = np.var(wrap_angle(straight[:, 2])) / 2
+alpha4_hat = np.mean(spin[:, 0] ** 2 + spin[:, 1] ** 2) / (np.pi / 2) ** 2
+for k, est in enumerate((alpha1_hat, alpha2_hat, alpha3_hat, alpha4_hat)):
+    print(f"alpha{k + 1}: estimated {est:.4f}, hidden {hidden[k]}")
 print("relative standard error with 200 runs: about", round(math.sqrt(2 / 200), 2))
 
 # %% [markdown] tags=["solution"]
@@ -829,8 +859,11 @@ print("relative standard error with 200 runs: about", round(math.sqrt(2 / 200), 
 # $\alpha_3$; a turn on the spot has $\delta_\text{trans} = 0$, so the heading
 # noise has variance $\alpha_1(\pi/2)^2$. A variance estimated from 200 runs
 # has a relative standard error of $\sqrt{2/200} = 10\%$, so estimates within
-# 20-30 % of the truth are as good as this experiment allows. Driving at an
-# angle would give $\alpha_2$ (rotation from translation) and $\alpha_4$.
+# 20-30 % of the truth are as good as this experiment allows. The same two
+# manoeuvres also give the other two alphas: driving straight, each of the two
+# rotations gets variance $\alpha_2 \cdot 1^2$, so the final heading varies by
+# $2\alpha_2$; turning on the spot, the distance driven (zero on average) has
+# variance $\alpha_4 (\pi/2)^2$. No third manoeuvre is needed.
 # On a real robot the "true end pose" comes from an external reference (a
 # motion-capture system, or marks on the floor), and systematic errors (a
 # wheel diameter that is off) should be calibrated out first (Borenstein et

@@ -220,23 +220,41 @@ print(f"lut:   within 2 cells + r*pi/n_bins on {np.mean(err_lut <= bound):.2%} o
 # most $\delta = \pi/n_\text{bins}$). The last one grows with the range: a
 # beam of length $r$ hitting a wall at incidence angle $\alpha$ moves its hit
 # point by about $r\delta$ sideways, which changes the range by
-# $r\delta\tan\alpha$, without bound for grazing beams. The figure shows the
-# error against the range for a coarse and a fine table, with the line
-# $2\,\text{cells} + r\pi/n_\text{bins}$.
+# $r\delta\tan\alpha$, without bound for grazing beams. The figure compares
+# a coarse table (36 bins, 10°) with a fine one (360 bins, 1°): on the left
+# the distribution of the errors, on the right how the large ones (the 90th
+# percentile) grow with the range, each against its line
+# $2\,\text{cells} + r\pi/n_\text{bins}$ (errors of zero are drawn at 0.1 mm on
+# the log scale).
 
 # %%
-fig, axs = plt.subplots(1, 2, figsize=(10, 3.5), sharey=True)
-for ax, nb in zip(axs, (36, 360)):
-    e = np.abs(cast(rmap, r_poses, r_angles, 6.0, method="lut", n_bins=nb) - z_exact)
-    ax.plot(z_exact.ravel(), e.ravel(), ".", ms=2, alpha=0.4)
-    r = np.linspace(0, 6, 50)
-    ax.plot(r, 2 * rmap.resolution + r * np.pi / nb, "r-", label=r"$2\,$cells$ + r\pi/n_{bins}$")
-    ax.set_yscale("symlog", linthresh=0.01)
-    ax.set_title(f"n_bins = {nb}: {np.mean(e <= 2 * rmap.resolution + z_exact * np.pi / nb):.1%} under the line")
-    ax.set_xlabel("exact range [m]")
-axs[0].set_ylabel("|lut - exact| [m]")
-axs[1].legend()
-plt.tight_layout()
+# left: how the errors are distributed (most are a few cm; a few rays are off by metres: grazing
+# beams and beams that turn past a corner). Right: how the large errors grow with the range, the
+# 90th percentile per 1 m of range against the line 2 cells + r pi / n_bins of each table
+fig, axs = plt.subplots(1, 2, figsize=(10, 3.6), layout="constrained")
+r_edges = np.arange(0.0, 7.0, 1.0)
+for nb, colour in ((36, "tab:orange"), (360, "tab:blue")):
+    e = np.abs(cast(rmap, r_poses, r_angles, 6.0, method="lut", n_bins=nb) - z_exact).ravel()
+    r_ex = z_exact.ravel()
+    under = np.mean(e <= 2 * rmap.resolution + r_ex * np.pi / nb)
+    print(f"n_bins = {nb:3d}: median error {np.median(e) * 100:.1f} cm, {under:.1%} of rays under the line, "
+          f"{np.mean(e > 1.0):.1%} off by more than 1 m")
+    axs[0].plot(np.sort(e) + 1e-4, np.arange(1, e.size + 1) / e.size, color=colour, label=f"n_bins = {nb}")
+    which = np.digitize(r_ex, r_edges) - 1
+    p90 = [np.percentile(e[which == b], 90) for b in range(len(r_edges) - 1)]
+    mid = r_edges[:-1] + 0.5
+    axs[1].plot(mid, p90, "o-", color=colour, label=f"n_bins = {nb}: 90th percentile")
+    axs[1].plot(mid, 2 * rmap.resolution + mid * np.pi / nb, "--", color=colour, label=f"n_bins = {nb}: the line")
+axs[0].axvline(2 * rmap.resolution, color="0.5", lw=1)
+axs[0].text(2 * rmap.resolution * 1.1, 0.05, "2 cells", fontsize=8)
+axs[0].set_xscale("log")
+axs[0].set_xlabel("|lut - exact| [m] (log scale)")
+axs[0].set_ylabel("fraction of rays with a smaller error")
+axs[0].legend(fontsize=8)
+axs[1].set_xlabel("exact range [m]")
+axs[1].set_ylabel("|lut - exact| [m]")
+axs[1].set_ylim(0, None)
+axs[1].legend(fontsize=7)
 plt.show()
 
 # %% [markdown]
@@ -377,10 +395,17 @@ for zstar in (0.05, 5.0, MAX_RANGE):
 
 # %%
 for zstar in (5.0, MAX_RANGE):
+    hit_density = beam.z_hit * float(beam.components(MAX_RANGE, zstar)["p_hit"])
     print(f"p(z = max range | z* = {zstar:4.1f} m) = {float(beam.pdf(MAX_RANGE, zstar)):.3f}"
-          f"  (of which the mass z_max = {beam.z_max:.2f})")
+          f"  = hit density {hit_density:.3f} per metre + the mass z_max = {beam.z_max:.2f}")
 
 # %% [markdown]
+# So the 4.040 is neither a probability nor a density alone: 3.989 of it is
+# the hit part's density (per metre, half of its truncated Gaussian piles up
+# against $z_\text{max}$), and 0.050 is the point mass, a probability. Being
+# larger than 1, it could not be a probability; it is a likelihood, used only
+# to compare particles on the same reading.
+#
 # Sampling from the model (what the simulator of the particle-filter
 # chapters does) first picks a cause with the mixture weights, then draws
 # from it by inverting its cumulative distribution. The histogram of 200,000
@@ -579,6 +604,16 @@ b_, f_ = drop["beam model"], drop["likelihood field"]
 assert np.all(b_[3:] < -25) and np.all(f_[[4, 5, 6]] < -10)   # sharp across (beam model) and in heading
 assert -5 < f_[3] < 0                                          # ... but the field hardly notices +20 cm in y
 assert np.all(np.abs(b_[1:3]) < 5) and np.all(np.abs(f_[1:3]) < 5) and f_[1] > 0   # along: hardly at all
+# the most one beam can lose against a perfect one: the field's peak over its floor (at max_dist);
+# the beam model's peak at z = z* over its lowest value, for each beam's z* of this scan
+cap_field = float(np.diff(lf.point_log_prob([lf.max_dist, 0.0]))[0])
+z_star = beam.expected(true_pose[None], angles)[0]
+z_grid = np.linspace(0, MAX_RANGE * (1 - 1e-9), 8001)
+cap_beam = np.array([np.log(beam.pdf(z, z)) - np.log(beam.pdf(z_grid, z)).min() for z in z_star])
+print(f"largest loss of one beam: likelihood field {cap_field:.2f} nats "
+      f"(ln({np.exp(lf.point_log_prob(0.0)):.3f} / {np.exp(lf.point_log_prob(lf.max_dist)):.4f})), "
+      f"beam model {np.median(cap_beam):.1f} nats (median over this scan's beams)")
+print(f"an end point 20 cm from the nearest wall loses {float(np.diff(lf.point_log_prob([0.2, 0.0]))[0]):.2f} nats")
 
 # %% [markdown]
 # In heading both models are sharp, and the beam model is sharp across the
@@ -587,9 +622,11 @@ assert np.all(np.abs(b_[1:3]) < 5) and np.all(np.abs(f_[1:3]) < 5) and f_[1] > 0
 # upper one (a drop of only about 3 nats): it scores each end point by its
 # distance to the nearest obstacle in *any* direction, so end points pushed
 # into a wall still sit on an obstacle and score fully; each end point that
-# now falls short of the other wall loses at most a bounded amount (the
-# uniform floor caps the loss per beam at under 2 nats, where the beam model,
-# which follows the ray, loses up to about 6); and in this scan about as many end
+# now falls short of the other wall loses a bounded amount (a 20 cm miss
+# costs 0.88 nats, and the uniform floor caps the loss per beam at 4.76
+# nats, printed above; the beam model's cap is about the same, 5.1 nats, so
+# the two models differ in *which* beams lose, not in how much one beam can
+# lose); and in this scan about as many end
 # points that sat slightly off the walls at the true pose land on them after
 # the shift. Which direction comes off lightly depends on the scan and on the
 # walls' thickness; the lesson is that the field's verdict across a corridor
@@ -843,6 +880,16 @@ plt.show()
 #    tempering, and find for 61 beams the `temper` that gives the same mean
 #    ESS as 10 beams. What does that say about how many "independent" beams
 #    the 61 are worth?
+# 4. **Implementation (self-checked).** Write the simplest ray caster of all,
+#    for one beam: `my_ray_cast(grid, pose, angle, max_range)` walks from the
+#    sensor at `pose = (x, y, theta)` in the direction `theta + angle` in fixed
+#    steps and returns the distance at which a step first lands in an obstacle
+#    cell (`grid.obstacles`, indexed by `grid.world_to_cell`), or `max_range`
+#    if none does within `max_range` or the beam leaves the map. Check it with
+#    `localize.check.ray_cast(my_ray_cast)`: its map has walls one cell thick,
+#    and it accepts a range within one cell of the exact one. Then make the
+#    step one and a half cells and run the check again. What goes wrong, and
+#    why? (See "The simplest marcher, and its step size" above.)
 
 # %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
 # Solution (click to show)
@@ -934,14 +981,22 @@ assert ess_k[5] > ess_k[20] > ess_k[10] > ess_k[61]          # higher with fewer
 from localize.sensors import select_beams  # noqa: E402
 
 assert not set(select_beams(61, 10)) <= set(select_beams(61, 20))   # the 10 are not a subset of the 20
+# is "20 beams beat 10" a property of the model or of these five scans? Five other scans each, six times:
+few = {k: BeamModel(grid, MAX_RANGE, **beam.params, caster=beam.caster, max_beams=k) for k in (10, 20)}
+wins = 0
+for seed in range(31, 37):
+    scans = world_beam.sample(np.repeat(true_pose[None], 5, axis=0), angles, np.random.default_rng(seed))
+    wins += mean_ess(few[20]) > mean_ess(few[10])
+print(f"20 beams give a larger mean ESS than 10 for {wins} of 6 seeds of five scans (seed 31 is the one above)")
 
 # %% [markdown] tags=["solution"]
 # <details>
 # <summary><b>Solution</b> (click to show)</summary>
 #
 # Dropping beams raises the ESS overall (5 beams against all 61), but not
-# monotonically: here 20 beams give a *larger* mean ESS than 10. The 10 evenly spaced beams are
-# not a subset of the 20, and a handful of beams that happen to hit a person or a door edge
+# monotonically: with these five scans 20 beams give a *larger* mean ESS than 10. That is a
+# property of the scans, not of the model: over six seeds of five scans it held for two
+# (printed above); which of the two wins depends on the scans. The 10 evenly spaced beams are not a subset of the 20, and a handful of beams that happen to hit a person or a door edge
 # decides how peaked the weights are; with so few beams, which ones are kept matters as much as
 # how many. Tempering the full scan by a factor $\gamma$ widens the weights smoothly instead. The $\gamma$ that matches 10 beams need not be $10/61$: the ESS of one cloud
 # depends on *which* beams are kept (10 beams spread over the field of view keep most of the
@@ -950,5 +1005,50 @@ assert not set(select_beams(61, 10)) <= set(select_beams(61, 20))   # the 10 are
 # independent beams the tempered scan is treated as. On real data the right $\gamma$ is found by
 # experiment (the MCL chapters), since it depends on how correlated the beams' errors really
 # are: a map error seen by 20 neighbouring beams is one piece of evidence, not twenty.
+#
+# </details>
+
+
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
+# Solution (click to show)
+# Exercise 4
+from localize import check  # noqa: E402
+
+
+def my_ray_cast(grid, pose, angle, max_range, step=None):
+    """Walk along the beam in fixed steps (a quarter of a cell unless told) until a step lands in an obstacle."""
+    x, y, theta = pose
+    step = grid.resolution / 4 if step is None else step
+    c, s = math.cos(theta + angle), math.sin(theta + angle)
+    t = 0.0
+    while t < max_range:
+        p = (x + t * c, y + t * s)
+        if not grid.contains(p):
+            return max_range
+        if grid.obstacles[tuple(grid.world_to_cell(p))]:
+            return t
+        t += step
+    return max_range
+
+
+print(check.ray_cast(my_ray_cast))
+print()
+print(check.ray_cast(lambda grid, pose, angle, max_range: my_ray_cast(grid, pose, angle, max_range,
+                                                                       step=1.5 * grid.resolution)))
+
+# %% [markdown] tags=["solution"]
+# <details>
+# <summary><b>Solution</b> (click to show)</summary>
+#
+# With a quarter-cell step the first step inside a wall is at most a quarter
+# of a cell beyond where the beam entered it, so the range is a little too
+# long but well within one cell, and the check passes. With a step of one and
+# a half cells a step can land on each side of a wall one cell thick without
+# ever landing in it: the beam passes through the wall and reads whatever lies
+# behind, the slip described in the chapter. Shorter steps make the slip rarer
+# but cost more lookups per ray, and a step of any fixed length can still cut
+# the corner of an obstacle cell; walking from cell to cell across every grid
+# line, as `localize.raycast.cast_ray` does, visits every cell the beam
+# touches and never slips.
 #
 # </details>

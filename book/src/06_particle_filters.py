@@ -419,6 +419,12 @@ plt.show()
 print(inspect.getsource(rs.systematic_loop).split('"""')[-1])
 
 # %% [markdown]
+# A word on notation first. The code draws `r = rng.random()` in $[0, 1)$ and
+# places pointer `m` at `(r + m) / n`; the offset of the text and of PR, in
+# $[0, 1/N)$, is that `r` divided by $N$. The pointers are the same. In this
+# chapter $r$ always means the offset in $[0, 1/N)$: the offset $r = 0.125$
+# with $N = 4$ is `rng.random()` returning $0.5$.
+#
 # Two details differ from the printed pseudocode, both deliberate. The loop
 # advances while `u >= c` instead of `u > c`, so a particle of weight zero can
 # never be chosen even if $r$ happens to be exactly 0; and it never steps past the
@@ -646,18 +652,27 @@ assert fracs[800] > 0.999 and fracs[1000] > 0.999 and fracs[100] > 0.9999 and ab
 # with about $10^5$ particles does the same number become a selective rule
 # ($N_\text{eff} < 0.1\,N$). (If the weights were
 # not normalised the number means something else again, which is the point.)
-# The figure shows the general relation: the fraction $N_\text{eff}/N$ depends on
-# the product $N \cdot \mathrm{std}(w)$ only.
+# The figure shows the general relation: the fraction $N_\text{eff}/N =
+# 1/(1 + N^2 \operatorname{Var}(w))$ depends on the product
+# $N \cdot \mathrm{std}(w)$ only, so one curve serves every $N$; a fixed
+# threshold on $\mathrm{std}(w)$ slides along it as $N$ changes.
 
 # %%
-fig, ax = plt.subplots(figsize=(6, 3))
-s = np.logspace(-6, -1, 300)
-for n in (100, 1000, 10000):
-    ax.semilogx(s, [rs.ess_from_weight_variance(v, n) / n for v in s ** 2], label=f"N = {n}")
+# N_eff / N = 1 / (1 + (N std)^2): one curve in N * std(w). The dots put the report's fixed threshold,
+# std = 3e-5, on it for each N of the table above: only near N = 100,000 does it fall on the slope
+fig, ax = plt.subplots(figsize=(6.5, 3.2))
+x = np.logspace(-3, 1.5, 300)
+ax.semilogx(x, [rs.ess_from_weight_variance((v / 1000) ** 2, 1000) / 1000 for v in x], color="tab:blue")
+for n, frac in fracs.items():
+    ax.plot(n * 3e-5, frac, "o", color="tab:red")
+    ax.annotate(f"N = {n:,}", (n * 3e-5, frac), xytext=(4, -13 if n in (800, 5000) else 7),
+                textcoords="offset points", fontsize=8, color="tab:red")
 ax.axhline(0.5, color="0.5", ls="--", lw=1)
-ax.set_xlabel("standard deviation of the normalised weights")
+ax.text(1.2e-3, 0.53, "the usual rule: resample when N_eff < N/2", fontsize=8, color="0.4")
+ax.set_xlabel("N x standard deviation of the normalised weights")
 ax.set_ylabel("N_eff / N")
-ax.legend(fontsize=8)
+ax.set_ylim(-0.05, 1.18)
+ax.set_title("red: the report's threshold std(w) = 3e-5 at each N", fontsize=9)
 fig.tight_layout()
 plt.show()
 
@@ -883,7 +898,9 @@ assert 5_000 < n_95 < 15_000
 #    (a) Compute $N_\text{eff}$ and check it against
 #    $N/(1 + N^2 \operatorname{Var}(w))$.
 #    (b) Run the low-variance sampler (PR table 4.4) by hand with the random
-#    offset $r = 0.125$. Which particles are chosen?
+#    offset $r = 0.125$ (in $[0, 1/N)$, as in PR). Which particles are chosen?
+#    Check your answer with `rs.systematic_loop`, whose `rng.random()` must then
+#    return $N r = 0.5$ (the solution shows how).
 #    (c) For particle 3 ($w = 0.4$), give the mean and variance of its number of
 #    copies under multinomial and under systematic resampling.
 # 2. **Implementation.** Write `residual_fixed(weights, rng)`, residual
@@ -907,6 +924,20 @@ print(f"    Var(w) = {rs.weight_variance(w_ex):.4f}; N / (1 + N^2 Var) = {rs.ess
 pointers_ex = 0.125 + np.arange(4) / 4
 print("(b) pointers", pointers_ex, "-> cumulative", np.cumsum(w_ex).round(2),
       "-> particles", np.searchsorted(np.cumsum(w_ex), pointers_ex, side="right"))
+
+
+class FixedDraw(np.random.Generator):
+    """A generator whose random() returns one chosen number: replays a hand calculation."""
+
+    def __init__(self, value):
+        super().__init__(np.random.PCG64(0))
+        self.value = value
+
+    def random(self, size=None, dtype=np.float64, out=None):
+        return self.value
+
+
+print("    rs.systematic_loop with rng.random() = N r = 0.5:", rs.systematic_loop(w_ex, FixedDraw(4 * 0.125)))
 print(f"(c) multinomial: mean {4 * 0.4:.1f}, variance {4 * 0.4 * 0.6:.2f};"
       f" systematic: 1 or 2 copies, P(2) = 0.6 -> mean 1.6, variance {0.6 * 0.4:.2f}")
 

@@ -113,14 +113,15 @@ plt.show()
 #    $G = \partial g / \partial x$ and $V = \partial g / \partial u$:
 #    $\bar\mu = g(u, \mu)$, $\;\bar\Sigma = G \Sigma G^\top + V M V^\top$, where
 #    $M = \operatorname{diag}(\alpha_1 v^2 + \alpha_2 \omega^2,\ \alpha_3 v^2 + \alpha_4 \omega^2)$
-#    is the control noise (PR table 7.2, lines 2–9).
+#    is the control noise (PR table 7.2, lines 2–7).
 # 2. **Correct** with each sighting $z^i$ of landmark $m_j$: predicted measurement
 #    $\hat z = h(\bar\mu, m_j)$, Jacobian
 #    $H = \begin{pmatrix} -\delta_x / r & -\delta_y / r & 0 \\ \delta_y / r^2 & -\delta_x / r^2 & -1 \end{pmatrix}$
 #    with $\delta = m_j - \bar\mu_{xy}$, innovation covariance
 #    $S = H \bar\Sigma H^\top + Q$, gain $K = \bar\Sigma H^\top S^{-1}$, and
 #    $\mu = \bar\mu + K (z^i - \hat z)$, $\Sigma = (I - K H)\bar\Sigma$
-#    (lines 10–19). The bearing part of $z^i - \hat z$ must be wrapped to
+#    (lines 11–17 for one sighting; the loop of lines 9–18 repeats them for
+#    each sighting). The bearing part of $z^i - \hat z$ must be wrapped to
 #    $[-\pi, \pi)$ — forgetting it is the classic EKF bug.
 #
 # `localize.ekf.EKFLocalizer` does this on top of
@@ -170,28 +171,38 @@ print("same covariance:", bool(np.allclose(ekf.cov, Sigma, atol=1e-10)))
 #
 # Instead of differentiating, the UKF pushes $2n+1 = 7$ carefully placed *sigma
 # points* through the nonlinear $g$ and $h$ and refits a Gaussian to where they
-# land (PR section 7.7, table 7.4). It needs no Jacobians and captures the curvature
-# of the models to second order. The catch for poses is the heading: the mean of
+# land (PR section 7.7, table 7.4). Table 7.4 needs no Jacobians at all, and
+# captures the curvature of the models to second order. The catch for poses is the heading: the mean of
 # sigma-point headings $179°$ and $-179°$ is $180°$, not $0°$. `UKFLocalizer`
 # therefore gives filterpy angle-aware mean and residual functions (headings and
-# bearings are averaged as unit vectors, differences are wrapped). Our UKF adds the
-# control noise in state space ($V M V^\top$) instead of augmenting the state as
-# table 7.4 does — a common simplification.
+# bearings are averaged as unit vectors, differences are wrapped). Our UKF
+# departs from table 7.4 in one place: it adds the control noise in state space,
+# as $V M V^\top$, instead of augmenting the state with the control noise. That
+# is a common simplification, but it brings back one Jacobian, the motion's
+# $V = \partial g / \partial u$ (the same as the EKF's); the measurement update
+# and the propagation of the mean and of $\Sigma$ through $g$ use none.
 
 # %% [markdown]
 # ## One run, three beliefs
 #
 # Here is the tracking scenario (a good initial estimate, small noise), all
 # three filters on one seed. Top row: the EKF's and UKF's 2σ ellipses (with a
-# wedge of ±2σ in heading); bottom row: MCL's particles, on the **same steps**.
+# wedge of ±2σ in heading; the EKF dashed over the UKF, because the two
+# coincide); bottom row: MCL's particles, on the **same steps**. The beliefs are
+# only a few tens of centimetres wide (the EKF's 2σ half-axes are printed below
+# the figure), so each panel shows the 1.2 m around the true robot (the black
+# circle), not the whole landmark field.
 
 # %%
 run = C.run_filters(C.scenario("tracking"), 1, snapshot_steps=(0, 10, 29))
-fig = plot_beliefs(run, (0, 10, 29))
+fig = plot_beliefs(run, (0, 10, 29), zoom=0.6)
 plt.show()
 for name in C.FILTERS:
     e = np.hypot(*(run.estimates[name][:, :2] - run.truth[:, :2]).T)
     print(f"{name}: mean position error {e.mean():.3f} m")
+for t in (0, 10, 29):
+    P = run.snapshots[t]["EKF"][1]
+    print(f"step {t:2d}: EKF 2-sigma ellipse half-axes {2 * np.sqrt(np.linalg.eigvalsh(P[:2, :2]))[::-1].round(2)} m")
 
 # %% [markdown]
 # When the problem is this benign the three agree to the centimetre: the
@@ -250,7 +261,11 @@ plt.show()
 #   **mean** NEES over the seeds and the second half of the run (a few
 #   overconfident runs drive it up: that is what it is for), the **fraction of
 #   those steps inside the band**, and the median, which shows what a typical
-#   run does;
+#   run does. Only the fraction is judged against the band: the band is for
+#   *one step's* average over the 20 seeds, while the mean column averages over
+#   the steps as well (a different statistic, with a narrower band of its own if
+#   the steps were independent, which they are not). So "above the band" below
+#   always means: the 20-seed average lies above the band at most steps;
 # * **time per step**, measured by `benchmarks/bench_ekf.py` (not in this
 #   notebook, whose printed outputs must be identical on every run).
 
@@ -324,6 +339,16 @@ n = N_SEEDS
 lo, hi = localize.metrics.nees_bounds(3, n)
 fail = {(s, f): mcs[s].metrics[f].failure_rate for s in C.SCENARIOS for f in C.FILTERS}
 in_band = {(s, f): mcs[s].nees_in_band(f) for s in C.SCENARIOS for f in C.FILTERS}
+
+
+def steps_above_below(s, f):
+    """Fractions of the second half's steps whose 20-seed average NEES lies above / below the band."""
+    avg = mcs[s].metrics[f].nees.mean(axis=0)[mcs[s].n_steps // 2:]
+    return float(np.mean(avg > hi)), float(np.mean(avg < lo))
+
+
+above = {(s, f): steps_above_below(s, f)[0] for s in C.SCENARIOS for f in C.FILTERS}
+below = {(s, f): steps_above_below(s, f)[1] for s in C.SCENARIOS for f in C.FILTERS}
 by = {(r["scenario"], r["filter"]): r for r in rows}
 
 
@@ -348,8 +373,7 @@ claims = {
     "1: EKF and UKF NEES inside the band at most steps": min(in_band["tracking", f] for f in ("EKF", "UKF")) >= 0.75,
     "1: MCL's NEES is inside the band at most steps too": in_band["tracking", "MCL"] >= 0.6,
     "2: the EKF and UKF converge in every seed": fail["large_prior", "EKF"] == fail["large_prior", "UKF"] == 0.0,
-    "2: MCL is overconfident (mean NEES above the band, almost never inside)":
-        row("large_prior", "MCL")["nees"] > hi and in_band["large_prior", "MCL"] <= 0.2,
+    "2: MCL is overconfident (its average NEES above the band at most steps)": above["large_prior", "MCL"] >= 0.8,
     "3: EKF and UKF fail far more often than MCL":
         C.rates_differ(fail["global", "EKF"], fail["global", "MCL"], n)
         and C.rates_differ(fail["global", "UKF"], fail["global", "MCL"], n),
@@ -363,12 +387,11 @@ claims = {
     "5: the Gaussians pick the right mode about a quarter of the time":
         all(abs((1 - fail["ambiguity", f]) - 0.25) <= C.rate_tolerance(n, 0.25) for f in ("EKF", "UKF")),
     "5: MCL does not fail": never_fails("ambiguity", "MCL"),
-    "5: MCL is too cautious there (NEES below the band)": row("ambiguity", "MCL")["nees"] < lo,
-    "6: the EKF is overconfident (mean NEES above the band, almost never inside)":
-        row("heading_noise", "EKF")["nees"] > hi and in_band["heading_noise", "EKF"] <= 0.2,
+    "5: MCL is too cautious there (its average NEES below the band at most steps)": below["ambiguity", "MCL"] >= 0.8,
+    "6: the EKF is overconfident (its average NEES above the band at most steps)": above["heading_noise", "EKF"] >= 0.8,
     "6: the UKF is consistent (NEES inside the band at most steps)": in_band["heading_noise", "UKF"] >= 0.6,
-    "6: MCL's typical run is consistent, a few are far overconfident":
-        row("heading_noise", "MCL")["nees_median"] <= hi and row("heading_noise", "MCL")["nees"] > 100 * hi,
+    "6: MCL's typical run is consistent (median NEES under 5), a few are far overconfident (mean over 1000)":
+        row("heading_noise", "MCL")["nees_median"] < 5 and row("heading_noise", "MCL")["nees"] > 1000,
     "6: all three have the same heading RMSE, 25-50 deg, within 5 deg": np.ptp(head6) <= 5
         and 25 <= min(head6) and max(head6) <= 50,
 }
@@ -489,23 +512,46 @@ plt.show()
 # %% [markdown]
 # ## Cost
 #
-# `python benchmarks/bench_ekf.py` times the filters on the same runs. On the
-# book's 2-core build machine (shared with other jobs while measuring, so the
-# absolute numbers are noisy) it printed:
-#
-# | sightings | filter | particles | time per step [ms] | × EKF |
-# |---|---|---|---|---|
-# | identified landmarks | EKF |  | 0.62 | 1.0 |
-# | identified landmarks | UKF |  | 1.61 | 2.6 |
-# | identified landmarks | MCL | 300 | 1.32 | 2.1 |
-# | identified landmarks | MCL | 1000 | 1.88 | 3.0 |
-# | identified landmarks | MCL | 3000 | 3.58 | 5.8 |
-# | landmarks look alike | EKF |  | 0.86 | 1.0 |
-# | landmarks look alike | UKF |  | 1.84 | 2.1 |
-# | landmarks look alike | MCL | 300 | 1.79 | 2.1 |
-# | landmarks look alike | MCL | 1000 | 3.70 | 4.3 |
-# | landmarks look alike | MCL | 3000 | 11.35 | 13.1 |
-#
+# `python benchmarks/bench_ekf.py` times the filters on the same runs, and
+# `python benchmarks/run_all.py --write` records its table in
+# `benchmarks/RESULTS.md`, with the machine and the date it was measured on
+# (the book's 2-core build machine, shared with other jobs, so the absolute
+# numbers are noisy). The next cell prints that table; timings vary from run
+# to run and machine to machine, so it is not compared when the chapter is
+# tested, and the cell after it checks only what the text says about them.
+
+# %% tags=["nbval-ignore-output"]
+from pathlib import Path  # noqa: E402
+
+results = Path("../benchmarks/RESULTS.md").read_text()
+cost_section = results[results.index("## bench_ekf\n"):]
+cost_section = cost_section[:cost_section.index("\n## ", 3)].strip()
+print(cost_section)
+
+# %%
+cost = {}                                     # (sightings, filter, particles) -> milliseconds per step
+for line in cost_section.splitlines():
+    cells = [c.strip() for c in line.strip().strip("|").split("|")]
+    if line.startswith("|") and len(cells) == 5 and cells[1] in C.FILTERS:
+        cost[cells[0], cells[1], cells[2]] = float(cells[3])
+groups = sorted({g for g, _, _ in cost})
+mcl_sizes = sorted({int(n) for _, f, n in cost if f == "MCL"})
+cost_claims = {
+    "the table has EKF, UKF and MCL rows for both kinds of sightings": len(groups) == 2 and len(cost) >= 6,
+    "the EKF is the cheapest filter in both": all(cost[g, "EKF", ""] == min(v for (h, _, _), v in cost.items() if h == g)
+                                                 for g in groups),
+    "MCL's time grows with the number of particles":
+        all(np.all(np.diff([cost[g, "MCL", str(n)] for n in mcl_sizes]) > 0) for g in groups),
+    "look-alike landmarks make MCL with the most particles dearer than identified ones":
+        cost["landmarks look alike", "MCL", str(mcl_sizes[-1])] > cost["identified landmarks", "MCL", str(mcl_sizes[-1])],
+    "no filter costs more than 20 times the EKF (the ratios are small)":
+        all(v <= 20 * cost[g, "EKF", ""] for (g, _, _), v in cost.items()),
+}
+for text, ok in cost_claims.items():
+    print("holds " if ok else "FAILS ", text)
+assert all(cost_claims.values()), [text for text, ok in cost_claims.items() if not ok]
+
+# %% [markdown]
 # The ratios are smaller than you might expect: in Python every filter pays a
 # fixed overhead per call, and the EKF's arithmetic (a few 3×3 products per
 # sighting) is so small that the overhead *is* its cost. MCL's work grows with
@@ -543,8 +589,8 @@ for name, situation, use in verdicts:
 
 # %% [markdown]
 # (Each cell: failure rate, position RMSE over all runs, and the mean NEES over
-# seeds and the steps of the second half, with the fraction of those steps
-# inside the 95% band; 3 is ideal. The numbers are those of the table above,
+# seeds and the steps of the second half, 3 being ideal, with the fraction of
+# those steps whose 20-seed average lies inside the 95% band. The numbers are those of the table above,
 # with its error bars; the claims behind the verdicts were checked there.)
 #
 # In short: **if the belief is, and stays, one blob, use a Kalman filter** — the
@@ -591,7 +637,8 @@ for name, situation, use in verdicts:
 # range or bearing is more informative here, relative to its predicted spread?
 #
 # **2 (implementation, self-checked).** Add *innovation gating* to the EKF:
-# skip a sighting whose Mahalanobis distance $y^\top S^{-1} y$ exceeds the 99%
+# skip a sighting whose *squared* Mahalanobis distance $y^\top S^{-1} y$ (with
+# $y = z - \hat z$, the innovation) exceeds the 99%
 # point of $\chi^2_2$ (9.21). First write the test,
 # `in_gate(mean, cov, z, landmark, Q)`, True when the sighting `z` of the
 # landmark at `landmark` is inside the gate, and check it with
@@ -716,7 +763,7 @@ assert mc.metrics["EKF"].failure_rate <= C.rate_tolerance(10, 0.0)      # identi
 # %% [markdown]
 # **4 (implementation, self-checked).** Write one EKF correction,
 # `ekf_update(mean, cov, z, landmark, Q)`, for a range-bearing sighting `z` of
-# the landmark at `landmark` (PR table 7.2, lines 12-21, for one landmark; use
+# the landmark at `landmark` (PR table 7.2, lines 11-17, for one landmark; use
 # `landmark_measurement` and `landmark_jacobian`). Test it with
 # `check.ekf_update(ekf_update)`; one of its cases sees a landmark behind the
 # robot, where the bearing innovation crosses $\pm\pi$.

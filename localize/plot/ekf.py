@@ -15,6 +15,7 @@ from . import draw_poses, new_axes
 
 __all__ = [
     "FILTER_COLORS",
+    "FILTER_STYLES",
     "covariance_ellipse",
     "draw_gaussian_belief",
     "draw_landmarks",
@@ -25,6 +26,10 @@ __all__ = [
 
 #: One colour per filter, used by every figure of the chapter.
 FILTER_COLORS = {"EKF": "tab:blue", "UKF": "tab:green", "MCL": "tab:red", "truth": "black"}
+#: Line style per filter. The EKF and the UKF often agree to the pixel: the UKF is drawn wide and
+#: underneath, the EKF dashed on top of it, so that both stay visible where they coincide.
+FILTER_STYLES = {"EKF": {"ls": "--", "lw": 1.6, "zorder": 4}, "UKF": {"ls": "-", "lw": 3.2, "alpha": 0.75, "zorder": 3},
+                 "MCL": {"ls": "-", "lw": 1.5, "zorder": 2}}
 #: The NEES of a consistent filter averages the state's dimension, 3 for (x, y, theta).
 _NEES_EXPECTED = 3.0
 #: Average NEES below this is drawn at it, so that the log axis keeps a bottom.
@@ -60,9 +65,10 @@ def covariance_ellipse(mean: ArrayLike, cov: ArrayLike, ax=None, n_std: float = 
 
 
 def draw_gaussian_belief(mean: ArrayLike, cov: ArrayLike, ax=None, color="tab:blue", n_std: float = 2.0,
-                         length: float = 1.0, label: str | None = None):
+                         length: float = 1.0, label: str | None = None, **kwargs):
     """A Gaussian pose belief: the x-y ellipse and a wedge of ``±n_std`` heading sigmas.
 
+    Extra keyword arguments (``ls``, ``lw``, ``zorder``, ...) style the ellipse.
     Returns ``(ellipse, wedge_lines)``.
 
     Examples
@@ -73,7 +79,7 @@ def draw_gaussian_belief(mean: ArrayLike, cov: ArrayLike, ax=None, color="tab:bl
     """
     _, ax = new_axes(ax)
     m = np.asarray(mean, dtype=float).reshape(3)
-    e = covariance_ellipse(m, cov, ax=ax, n_std=n_std, color=color, label=label)
+    e = covariance_ellipse(m, cov, ax=ax, n_std=n_std, color=color, label=label, **kwargs)
     s = float(np.sqrt(max(np.asarray(cov, dtype=float)[2, 2], 0.0)))
     lines = []
     for d, ls in ((0.0, "-"), (-n_std * s, ":"), (n_std * s, ":")):
@@ -98,12 +104,14 @@ def draw_landmarks(landmarks: ArrayLike, ax=None, labels: bool = True, **kwargs)
     return sc
 
 
-def plot_beliefs(run, steps, axes=None, pad: float = 2.0, n_std: float = 2.0, max_particles: int = 400):
+def plot_beliefs(run, steps, axes=None, pad: float = 2.0, n_std: float = 2.0, max_particles: int = 400,
+                 zoom: float | None = None):
     """The chapter's key figure: beliefs of all filters on the same steps.
 
-    Top row: the EKF's and the UKF's 2-sigma ellipses (with heading wedges);
-    bottom row: MCL's particle cloud. One column per step, same limits in a
-    column; the true pose is the black robot.
+    Top row: the EKF's and the UKF's 2-sigma ellipses (with heading wedges;
+    the EKF dashed over the UKF, see :data:`FILTER_STYLES`); bottom row: MCL's
+    particle cloud. One column per step, same limits in a column; the true
+    pose is the black robot.
 
     Parameters
     ----------
@@ -113,6 +121,11 @@ def plot_beliefs(run, steps, axes=None, pad: float = 2.0, n_std: float = 2.0, ma
     axes : array of Axes, shape (2, len(steps)), optional
     pad : float
         Margin around the landmarks, metres.
+    zoom : float, optional
+        Half-width (metres) of a window centred on the true pose of each step,
+        instead of the whole landmark field: for beliefs a few centimetres
+        wide, which the whole field shows as dots. The robot and the heading
+        wedges are then drawn at the window's scale.
 
     Returns
     -------
@@ -134,15 +147,20 @@ def plot_beliefs(run, steps, axes=None, pad: float = 2.0, n_std: float = 2.0, ma
     else:
         axes = np.asarray(axes).reshape(2, len(steps))
         fig = axes[0, 0].figure
+    if zoom is not None:
+        check_positive(zoom, "zoom", "metres")
     lm = run.scenario.landmarks
     lo, hi = lm.min(axis=0) - pad, lm.max(axis=0) + pad
+    scale = 1.0 if zoom is None else zoom / 2.0       # robot radius and wedge length follow the window
     for c, t in enumerate(steps):
         snap = run.snapshots[t]
         truth = run.truth[t]
+        if zoom is not None:
+            lo, hi = truth[:2] - zoom, truth[:2] + zoom
         for r in range(2):
             ax = axes[r, c]
             draw_landmarks(lm, ax=ax, labels=False, s=80)
-            draw_robot(truth, ax=ax, radius=0.35, color="k")
+            draw_robot(truth, ax=ax, radius=0.35 if zoom is None else zoom / 8, color="k")
             ax.set_xlim(lo[0], hi[0])
             ax.set_ylim(lo[1], hi[1])
             ax.set_aspect("equal")
@@ -150,13 +168,14 @@ def plot_beliefs(run, steps, axes=None, pad: float = 2.0, n_std: float = 2.0, ma
         for name in ("EKF", "UKF"):
             if name in snap:
                 m, P = snap[name]
-                draw_gaussian_belief(m, P, ax=axes[0, c], color=FILTER_COLORS[name], n_std=n_std, label=name)
+                draw_gaussian_belief(m, P, ax=axes[0, c], color=FILTER_COLORS[name], n_std=n_std, label=name,
+                                     length=scale, **FILTER_STYLES[name])
         if "MCL" in snap:
             parts = snap["MCL"]
             if len(parts) > max_particles:
                 parts = parts[np.linspace(0, len(parts) - 1, max_particles).astype(int)]
             axes[1, c].set_xlim(lo[0], hi[0])
-            draw_poses(parts, ax=axes[1, c], color=FILTER_COLORS["MCL"], alpha=0.5, length=0.4)
+            draw_poses(parts, ax=axes[1, c], color=FILTER_COLORS["MCL"], alpha=0.5, length=0.4 * scale)
         axes[0, c].set_title(f"step {t}", fontsize=9)
     axes[0, 0].set_ylabel("EKF / UKF (2σ)")
     axes[1, 0].set_ylabel("MCL particles")
@@ -181,7 +200,7 @@ def plot_errors(mc, ax=None, what: str = "position", band: tuple[float, float] =
         lo, hi = np.percentile(e, band, axis=0)
         col = FILTER_COLORS.get(name, None)
         ax.fill_between(t, lo, hi, color=col, alpha=0.15, lw=0)
-        ax.plot(t, np.median(e, axis=0), color=col, label=name)
+        ax.plot(t, np.median(e, axis=0), color=col, label=name, **FILTER_STYLES.get(name, {}))
     if what == "position":
         ax.axhline(mc.fail_threshold, color="gray", ls="--", lw=1, label="failure threshold")
     return _per_step_axes(ax, "position error [m]" if what == "position" else "heading error [deg]",
@@ -211,5 +230,6 @@ def plot_nees(mc, ax=None):
     ax.axhspan(lo, hi, color="gray", alpha=0.2, label="95% band (consistent)")
     ax.axhline(_NEES_EXPECTED, color="gray", lw=0.8)
     for name, m in mc.metrics.items():
-        ax.plot(t, np.maximum(m.nees.mean(axis=0), _NEES_FLOOR), color=FILTER_COLORS.get(name), label=name)
+        ax.plot(t, np.maximum(m.nees.mean(axis=0), _NEES_FLOOR), color=FILTER_COLORS.get(name), label=name,
+                **FILTER_STYLES.get(name, {}))
     return _per_step_axes(ax, "average NEES", f"{mc.scenario.title}: NEES, {mc.n_seeds} seeds")
