@@ -295,10 +295,7 @@ def test_the_prose_in_code_check():
     assert _prose_in_code("# the next lines draw\nplt.show()") is None
 
 
-KNOWN_PROSE_IN_CODE = {
-    "08_mcl_failures.ipynb": "ch8 cell 16: the KLD-sampling introduction (heading and n(k) formula) is a "
-                             "comment block in a code cell; the lead fixes its markdown marker with the new run loop",
-}
+KNOWN_PROSE_IN_CODE: dict[str, str] = {}   # notebook name -> why it is a known failure (none today)
 
 
 @pytest.mark.parametrize("nb_path", [

@@ -363,7 +363,8 @@ slow_fast, per_beam = kidnap_summary(*kidnap_trial(alpha_fast=0.2)), kidnap_summ
 assert max(slow_fast["injected_localized"], per_beam["injected_localized"]) < 0.5 * fig.summary["injected_localized"]
 assert slow_fast["recovered"] is None or slow_fast["recovered"] > fig.summary["recovered"]   # ... and react later
 fig
-#
+
+# %% [markdown]
 # ## KLD-sampling: as many particles as needed
 #
 # Global localization needs thousands of particles; tracking a localized robot
