@@ -20,7 +20,7 @@ from .. import discrete
 from .. import histogram as hist
 from ..maps import hallway, tile_world
 from ..plot.histogram import draw_bars, draw_tiles
-from . import interactive_app, with_hint
+from . import interactive_app, show_figure, with_hint
 
 __all__ = ["hallway_run", "hallway_figure", "tile_world_run", "tile_world_figure", "hallway_app",
            "tile_world_app", "TILE_START", "TILE_PATH", "DEMOS", "DEMO_VARIANTS"]
@@ -170,16 +170,10 @@ def hallway_app():
     ['sensor right', 'motion noise', 'cycles', 'cyclic world']
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
-    import matplotlib.pyplot as plt
     from ipywidgets import Checkbox, FloatSlider, IntSlider
 
-    def show(p_hit, motion_noise, n_steps, cyclic):
-        fig = hallway_figure(p_hit, motion_noise, n_steps, cyclic)
-        plt.show()
-        plt.close(fig)
-
     return interactive_app(
-        show,
+        hallway_figure,
         p_hit=FloatSlider(value=0.75, min=0.5, max=1.0, step=0.05, description="sensor right"),
         motion_noise=FloatSlider(value=0.2, min=0.0, max=0.9, step=0.05, description="motion noise"),
         n_steps=IntSlider(value=3, min=1, max=20, description="cycles"),
@@ -215,7 +209,6 @@ def tile_world_app():
     1
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
-    import matplotlib.pyplot as plt
     from ipywidgets import Button, FloatSlider, HBox, Output, VBox
 
     state = _TileStepper()
@@ -227,9 +220,7 @@ def tile_world_app():
     def redraw(*_):
         with out:
             out.clear_output(wait=True)
-            fig = tile_world_figure(p_hit.value, noise.value, state.n_steps)
-            plt.show()
-            plt.close(fig)
+            show_figure(tile_world_figure(p_hit.value, noise.value, state.n_steps))
 
     step_b.on_click(lambda b: (state.step(), redraw()))
     reset_b.on_click(lambda b: (state.reset(), redraw()))
