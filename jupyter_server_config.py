@@ -12,6 +12,12 @@ overwrite them. JupyterLab then runs them as usual but never autosaves them; Ctr
 under a new name is the reader's own (names ending in ``-mine.ipynb`` are ignored by git).
 The homework (``book/homework/``) stays writable: it is meant to be filled in.
 
+Solutions: JupyterLab shows a cell's output again when the cell runs, so Run All printed
+the answers of the exercises under them. Every kernel this server starts runs
+``jupyter_kernel_startup.py`` (through ``PYTHONSTARTUP``; a reader's own ``PYTHONSTARTUP`` file
+still runs after it), which folds the output of cells tagged ``solution`` into a closed
+"Output of the solution (click to show)" (:mod:`localize.widgets.solutions`).
+
 Running as root: Jupyter refuses to start as root unless told so (``--allow-root``); this
 file does not change that (see the README).
 
@@ -20,6 +26,7 @@ and ``tests/test_browser.py`` (JupyterLab in Chromium: Run All, then save, leave
 byte-identical).
 """
 
+import os
 import re
 from pathlib import Path
 
@@ -58,3 +65,9 @@ class BookContentsManager(AsyncLargeFileManager):
 
 c = get_config()  # noqa: F821 - defined by the config loader
 c.ServerApp.contents_manager_class = BookContentsManager
+
+# kernels inherit the server's environment: fold the solutions' outputs (see above)
+KERNEL_STARTUP = str(Path(__file__).resolve().with_name("jupyter_kernel_startup.py"))
+if os.environ.get("PYTHONSTARTUP") not in (None, "", KERNEL_STARTUP):
+    os.environ["LOCALIZE_USER_PYTHONSTARTUP"] = os.environ["PYTHONSTARTUP"]
+os.environ["PYTHONSTARTUP"] = KERNEL_STARTUP

@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import asyncio
 import hashlib
+import os
 import shutil
 from pathlib import Path
+from unittest import mock
 
 import pytest
 
@@ -40,7 +42,8 @@ def manager(tmp_path):
     (book / "homework").mkdir()
     for name in ("01_bayes_filter.ipynb", "src/01_bayes_filter.py", "homework/homework.ipynb"):
         shutil.copy(ROOT / "book" / name, book / name)
-    config = PyFileConfigLoader(CONFIG.name, path=str(tmp_path)).load_config()
+    with mock.patch.dict(os.environ):           # the config sets PYTHONSTARTUP for the kernels: not for us
+        config = PyFileConfigLoader(CONFIG.name, path=str(tmp_path)).load_config()
     base = config.ServerApp.contents_manager_class
     assert base.__name__ == "BookContentsManager"
     cls = jupytext_cm.build_async_jupytext_contents_manager_class(base)   # what the jupytext extension does
@@ -75,6 +78,16 @@ def test_chapters_and_twins_are_read_only_and_saving_changes_no_byte(manager):
     asyncio.run(run())
     assert [_digest(f) for f in files] == before
     assert (book / "01_bayes_filter-mine.ipynb").exists()
+
+
+def test_kernels_of_the_server_run_the_book_startup_and_keep_the_readers_own(tmp_path):
+    env = {"PYTHONSTARTUP": "/home/reader/.pythonrc"}
+    with mock.patch.dict(os.environ, env):
+        PyFileConfigLoader(CONFIG.name, path=str(ROOT)).load_config()
+        assert os.environ["PYTHONSTARTUP"] == str(ROOT / "jupyter_kernel_startup.py")
+        assert os.environ["LOCALIZE_USER_PYTHONSTARTUP"] == "/home/reader/.pythonrc"
+        PyFileConfigLoader(CONFIG.name, path=str(ROOT)).load_config()       # loading twice changes nothing
+        assert os.environ["LOCALIZE_USER_PYTHONSTARTUP"] == "/home/reader/.pythonrc"
 
 
 def test_a_readers_copies_are_ignored_by_git():
