@@ -1,6 +1,6 @@
 """Jupyter server configuration of the book: reading and running a chapter never changes the clone.
 
-Used by the README's book command, ``jupyter lab --config=jupyter_server_config.py book/``.
+Used by the README's book command, ``jupyter lab book/ --config=jupyter_server_config.py``.
 
 The chapters ``book/NN_name.ipynb`` and their jupytext twins ``book/src/NN_name.py`` are the
 book's source, kept in git. JupyterLab's autosave (every two minutes) rewrote both after a

@@ -659,7 +659,7 @@ def scan_log_likelihood(fn: Callable, params: dict | None = None) -> Report:
     *product* of the beam densities and its log is the sum of their logs.
     Two scans of 360 beams: one that fits its expected ranges, and the same
     readings scored at a wrong pose, whose product of densities (about
-    ``exp(-1000)``) underflows to 0 in floating point, so that
+    ``exp(-1260)``) underflows to 0 in floating point, so that
     ``log(prod(p))`` gives ``-inf`` there.
     """
     prm = dict(BEAM_PARAMS if params is None else params)
