@@ -85,3 +85,13 @@ def test_other_cells_and_errors_are_shown_as_usual(kernel):
     msgs = run_cell(kernel, "'after an error'")                   # the hook has let go of the output
     assert [m["content"]["data"]["text/plain"] for m in msgs if m["msg_type"] == "execute_result"] == [
         "'after an error'"]
+
+
+def test_a_finished_progress_bar_of_a_solution_is_not_shown_again(kernel):
+    """A closed widget (tqdm's notebook bar with leave=False) cannot be displayed again: it is dropped."""
+    msgs = run_cell(kernel, "import ipywidgets as W\nfrom IPython.display import display\n"
+                            "bar = W.IntProgress(3)\ndisplay(bar)\nprint('done')\nbar.close()\n"
+                            "kept = W.IntSlider(4)\ndisplay(kept)", tags=["solution"])
+    shown = [m["content"]["data"] for m in msgs if m["msg_type"] == "display_data"]
+    assert len(shown) == 2 and "done" in shown[0]["text/html"], shown       # the fold, then the live slider
+    assert "application/vnd.jupyter.widget-view+json" in shown[1]

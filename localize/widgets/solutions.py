@@ -98,6 +98,7 @@ class _Folder:
         outputs = [o["data"] for o in io._outputs]
         widgets = [d for d in outputs if "application/vnd.jupyter.widget-view+json" in d]
         shown = [d for d in outputs if d not in widgets]
+        widgets = [d for d in widgets if _widget_alive(d)]  # a closed one (a finished progress bar) is gone
         from IPython.display import display
 
         if io.stdout or shown:
@@ -106,6 +107,15 @@ class _Folder:
                     raw=True)
         for d in widgets:                                   # a widget cannot live inside HTML: show it as is
             display(d, raw=True)
+
+
+def _widget_alive(data: dict) -> bool:
+    """Whether the widget a widget-view bundle shows still exists (tqdm closes its bars when they finish)."""
+    try:
+        from ipywidgets.widgets.widget import _instances
+    except ImportError:  # pragma: no cover - another ipywidgets layout: keep the view
+        return True
+    return data["application/vnd.jupyter.widget-view+json"].get("model_id") in _instances
 
 
 def install(shell=None) -> bool:
