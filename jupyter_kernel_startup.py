@@ -1,6 +1,6 @@
 """Run by every kernel that the book's Jupyter server starts (``PYTHONSTARTUP``, set by jupyter_server_config.py).
 
-Folds the output of solution cells after Run All (:mod:`localize.widgets.solutions`), then runs
+Folds the output of solution cells after Run All (:mod:`localize.widgets._solutions`), then runs
 the reader's own ``PYTHONSTARTUP`` file, if there was one. Outside a Jupyter kernel (a Python
 prompt in JupyterLab's terminal) it does nothing but the latter.
 """
@@ -12,7 +12,7 @@ def _book_kernel_startup() -> None:
     import warnings
 
     try:
-        from localize.widgets.solutions import install
+        from localize.widgets._solutions import install
 
         install()
     except Exception as err:  # noqa: BLE001 - a missing package must not stop the kernel

@@ -16,7 +16,7 @@ Solutions: JupyterLab shows a cell's output again when the cell runs, so Run All
 the answers of the exercises under them. Every kernel this server starts runs
 ``jupyter_kernel_startup.py`` (through ``PYTHONSTARTUP``; a reader's own ``PYTHONSTARTUP`` file
 still runs after it), which folds the output of cells tagged ``solution`` into a closed
-"Output of the solution (click to show)" (:mod:`localize.widgets.solutions`).
+"Output of the solution (click to show)" (:mod:`localize.widgets._solutions`).
 
 Running as root: Jupyter refuses to start as root unless told so (``--allow-root``); this
 file does not change that (see the README).

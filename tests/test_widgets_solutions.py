@@ -1,4 +1,4 @@
-"""Solution outputs stay folded when JupyterLab runs them (localize.widgets.solutions), in a real kernel.
+"""Solution outputs stay folded when JupyterLab runs them (localize.widgets._solutions), in a real kernel.
 
 The kernel is started as the book's Jupyter server starts it (``PYTHONSTARTUP`` =
 ``jupyter_kernel_startup.py``), and cells are sent as JupyterLab sends them: the cell's metadata,

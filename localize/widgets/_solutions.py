@@ -1,5 +1,8 @@
 """Solutions stay folded after Run All: a kernel hook that puts a solution cell's output in a closed disclosure.
 
+(Not a widget: private to the package so that the widget conventions and benchmarks skip it; the
+book's kernels install it through ``jupyter_kernel_startup.py``.)
+
 The chapters open with their solution cells collapsed (``tools/hide_solutions.py`` sets
 ``jupyter.outputs_hidden``), but JupyterLab shows a cell's output again whenever the cell
 runs, so Run All printed every answer (chapter 3: "45 deg / 30 deg = 1.5 -> not a whole
