@@ -44,8 +44,10 @@ check                      your function
 ``resampler``              ``fn(weights, rng) -> indices``
 ``low_variance_sampler``   ``fn(weights, rng) -> indices``
 ``effective_sample_size``  ``fn(weights) -> float``
+``resample_if_needed``     ``fn(particles, weights, rng, threshold) -> (particles, weights)``
 ``mcl_step``               ``fn(particles, u, ranges, angles, motion, sensor, rng) -> (N, 3)``
 ``world_to_cell``          ``fn(points, origin, resolution) -> (N, 2)`` integer ``(row, col)``
+``ray_cast``               ``fn(grid, pose, angle, max_range) -> range`` (one beam)
 ``grid_update``            ``fn(belief, expected, beam_bins, ranges, beam_pdf) -> (K, H, W)``
 ``map_image``              ``fn(image, negate) -> occupancy`` (row 0 at the bottom, NaN unknown)
 ``injection``              ``fn(likelihoods, w_slow, w_fast, alpha_slow, alpha_fast) -> (w_slow, w_fast, p)``
@@ -84,7 +86,9 @@ __all__ = [
     "resampler",
     "low_variance_sampler",
     "effective_sample_size",
+    "resample_if_needed",
     "mcl_step",
+    "ray_cast",
     "world_to_cell",
     "grid_update",
     "map_image",
@@ -357,10 +361,15 @@ def histogram_move(fn: Callable) -> Report:
                 continue
             wrap = histogram.move(b, step, mode="wrap")
             opposite = histogram.move(b, (-step[0], -step[1]), fill=0.001)
+            wrap_opposite = histogram.move(b, (-step[0], -step[1]), mode="wrap")
             if np.allclose(out, wrap, rtol=1e-8):
                 hint = "your world wraps around (np.roll); this world is bounded: fill the uncovered tiles"
             elif np.allclose(out, opposite, rtol=1e-8):
                 hint = "you moved the belief the opposite way: the robot moving left moves its belief left"
+            elif np.allclose(out, wrap_opposite, rtol=1e-8):
+                hint = ("you moved the wrong way, and your world wraps around: np.roll(b, shift, axis) moves entries "
+                        "towards HIGHER indices for a positive shift, so a step (drow, dcol) is np.roll(b, (drow, dcol), "
+                        "axis=(0, 1)); and this world is bounded: fill the uncovered tiles instead of wrapping")
             elif np.allclose(out.sum(), 1.0) is False:
                 hint = "normalise after filling the uncovered tiles"
             else:
@@ -372,6 +381,13 @@ def histogram_move(fn: Callable) -> Report:
 
 
 # ---------------------------------------------------------------------------- motion
+def _variance_as_std(rot1, trans, rot2, alphas):
+    """The classic mistake as a noise convention: the variance formula used as a standard deviation."""
+    from .motion import odometry_variances
+
+    return tuple(np.square(v) for v in odometry_variances(rot1, trans, rot2, alphas))
+
+
 #: Odometry pairs ``(prev_odom, odom)`` that :func:`sample_odometry` tests, with what each one catches.
 ODOMETRY_CASES: list[tuple[str, tuple[NDArray, NDArray], str]] = [
     ("a forward move with a turn", (np.array([1.0, 2.0, 0.3]), np.array([1.8, 2.9, 1.1])),
@@ -438,12 +454,27 @@ def sample_odometry(fn: Callable) -> Report:
 
             fg, fr = feats(got), feats(ref)
             sd = np.maximum(fr.std(axis=0), 1e-12)
-            mean_err = np.abs(fg.mean(axis=0) - fr.mean(axis=0)) / (sd / math.sqrt(n))
-            var_ratio = fg.var(axis=0) / np.maximum(fr.var(axis=0), 1e-300)
-            ok_mean = bool(np.all(mean_err < 6.0))
-            ok_var = bool(np.all(np.abs(var_ratio - 1.0) < var_tol))
+
+            def matches(fa, fb, sd=sd):
+                """Same mean (6 standard errors) and variances (var_tol) as the sample fb."""
+                mean_err = np.abs(fa.mean(axis=0) - fb.mean(axis=0)) / (sd / math.sqrt(n))
+                ratio = fa.var(axis=0) / np.maximum(fb.var(axis=0), 1e-300)
+                return bool(np.all(mean_err < 6.0)), bool(np.all(np.abs(ratio - 1.0) < var_tol)), ratio
+
+            ok_mean, ok_var, var_ratio = matches(fg, fr)
+
+            def as_std(start_k=start_k, uk=uk, k=k):  # drawn only when needed: the mistake's distribution
+                return feats(motion.sample_odometry(np.tile(start_k, (400_000, 1)), uk, alphas,
+                                                    np.random.default_rng(200 + k), noise=_variance_as_std))
+
             if ok_mean and ok_var:
                 hint = ""
+            elif np.all(fg.std(axis=0) < 1e-12):
+                hint = ("all particles got the same noise (zero spread): draw one noise value per particle, "
+                        "rng.normal(0.0, sd, size=len(poses)), not one value shared by every particle")
+            elif all(matches(fg, as_std())[:2]):
+                hint = ("you used the VARIANCE alpha1*rot1**2 + alpha2*trans**2 as a standard deviation: pass its "
+                        "square root to rng.normal")
             elif np.all(var_ratio < 0.5):
                 hint = ("the spread is far too small: alpha1*rot1**2 + alpha2*trans**2 is a VARIANCE; "
                         "pass its square root as the standard deviation")
@@ -626,13 +657,17 @@ def scan_log_likelihood(fn: Callable, params: dict | None = None) -> Report:
 
     Beams are independent given the pose, so the scan likelihood is the
     *product* of the beam densities and its log is the sum of their logs.
+    Two scans of 360 beams: one that fits its expected ranges, and the same
+    readings scored at a wrong pose, whose product of densities (about
+    ``exp(-1260)``) underflows to 0 in floating point, so that
+    ``log(prod(p))`` gives ``-inf`` there.
     """
     prm = dict(BEAM_PARAMS if params is None else params)
 
     def body(r: Report) -> None:
         rng = np.random.default_rng(5)
-        expected = rng.uniform(1.0, 9.0, 180)
-        ranges = np.clip(expected + rng.normal(0, 0.2, 180), 0.0, prm["max_range"])
+        expected = rng.uniform(1.0, 9.0, 360)
+        ranges = np.clip(expected + rng.normal(0, 0.2, 360), 0.0, prm["max_range"])
         ref = float(np.log(_beam_ref(ranges, expected, prm)).sum())
         name = "returns the log of the product of beam densities"
         v = _array(r, name, _call(r, name, fn, ranges, expected, dict(prm)))
@@ -643,14 +678,30 @@ def scan_log_likelihood(fn: Callable, params: dict | None = None) -> Report:
         elif np.isclose(val, probs.sum(), rtol=1e-6) or np.isclose(val, np.log(probs.sum()), rtol=1e-6):
             hint = ("you added the beam probabilities (a heuristic some reports use); independent beams multiply: "
                     "sum their LOGS")
-        elif val == -np.inf or (np.isfinite(val) is False):
-            hint = ("the product of 180 small numbers underflows to 0 and log(0) = -inf: add log-probabilities "
+        elif not np.isfinite(val):
+            hint = ("the product of 360 small numbers underflows to 0 and log(0) = -inf: add log-probabilities "
                     "instead of multiplying probabilities")
         else:
             hint = "log p(scan | pose) = sum over beams of log p(z_k | z_k*)"
         r.add(name, bool(np.isclose(val, ref, rtol=1e-6)), f"{val:.6g}", hint, expected=f"{ref:.6g}")
-        r.add("stays finite for 180 beams (no underflow)", bool(np.isfinite(val)), f"got {val}",
-              "work in log space: sum log-densities instead of taking the log of a product")
+        # the same readings scored at a wrong pose: every beam about 3 m off, its product about exp(-1000)
+        wrong = np.roll(expected, 90)
+        ref_w = float(np.log(_beam_ref(ranges, wrong, prm)).sum())
+        name = "a scan at a wrong pose: finite, no underflow (log of the product = sum of the logs)"
+        vw = _array(r, name, _call(r, name, fn, ranges, wrong, dict(prm)))
+        val_w = float(np.reshape(vw, -1)[0])
+        ok = bool(np.isclose(val_w, ref_w, rtol=1e-6))
+        if ok:
+            hint = ""
+        elif val_w == -np.inf and np.prod(_beam_ref(ranges, wrong, prm)) == 0.0:
+            hint = (f"you took the log of the product: the product of these 360 densities is about "
+                    f"exp({ref_w:.0f}), below the smallest float (about exp(-745)), so it is 0 and log(0) = -inf. "
+                    "Sum the log-densities instead: np.sum(np.log(p))")
+        elif not np.isfinite(val_w):
+            hint = "work in log space: sum log-densities instead of taking the log of a product"
+        else:
+            hint = "log p(scan | pose) = sum over beams of log p(z_k | z_k*)"
+        r.add(name, ok, f"{val_w:.6g}", hint, expected=f"{ref_w:.6g}")
         shifted = float(np.reshape(np.asarray(fn(ranges, expected + 1.0, dict(prm)), float), -1)[0])
         r.add("a matching scan scores higher than a shifted one", bool(val > shifted),
               f"matching {val:.4g}, shifted by 1 m {shifted:.4g}",
@@ -825,6 +876,94 @@ def effective_sample_size(fn: Callable) -> Report:
     return _run("effective_sample_size", body)
 
 
+def resample_if_needed(fn: Callable, threshold: float = 0.5) -> Report:
+    """Check adaptive resampling ``fn(particles, weights, rng, threshold) -> (particles, weights)``.
+
+    Resample (any unbiased scheme) only when the effective sample size falls
+    below ``threshold * N`` (chapter 6; :func:`localize.resample.needs_resampling`);
+    afterwards every particle has weight ``1/N``. Otherwise return the
+    particles and their (normalised) weights unchanged: resampling at every
+    step throws away information for nothing (Doucet, Godsill and Andrieu
+    2000; PR section 4.3.4).
+
+    Properties: nearly even weights (``N_eff = 0.9 N``) keep particles and
+    weights; degenerate weights (``N_eff`` about 2) resample in proportion to
+    the weights (a statistical test, five standard errors) and reset the
+    weights to ``1/N``; ``threshold = 0`` never resamples; the rng is used.
+    """
+    from .resample import effective_sample_size as ess
+
+    def call(r: Report, name: str, parts: NDArray, w: NDArray, seed: int, thr: float) -> tuple[NDArray, NDArray]:
+        out = _call(r, name, fn, parts.copy(), w.copy(), np.random.default_rng(seed), thr)
+        if not isinstance(out, (tuple, list)) or len(out) != 2:
+            r.add(name, False, f"returned {type(out).__name__}",
+                  "return the pair (particles, weights): the weights are needed whether or not you resampled")
+            raise _Stop
+        return (_array(r, name, out[0], parts.shape), _array(r, name, out[1], w.shape))
+
+    def body(r: Report) -> None:
+        n = 1000
+        rng0 = np.random.default_rng(31)
+        parts = np.column_stack([np.arange(n, dtype=float), rng0.uniform(0, 5, n), rng0.uniform(-np.pi, np.pi, n)])
+        even = rng0.uniform(0.6, 1.4, n)
+        even /= even.sum()
+        name = f"even weights (N_eff = {ess(even) / n:.2f} N >= {threshold} N): particles and weights are kept"
+        p1, w1 = call(r, name, parts, even, 0, threshold)
+        ok = bool(np.array_equal(p1, parts) and np.allclose(w1, even, rtol=1e-9))
+        if ok:
+            hint = ""
+        elif not np.array_equal(p1, parts):
+            hint = (f"you resampled although N_eff = {ess(even):.0f} is above threshold * N = {threshold * n:.0f}: "
+                    "resampling at every step throws away particles for nothing (it only adds noise); resample "
+                    "only when effective_sample_size(weights) < threshold * N")
+        else:
+            hint = "without resampling the weights stay what they were (normalised); do not reset them to 1/N"
+        r.add(name, ok, "particles changed" if not np.array_equal(p1, parts) else f"weights {_fixed(w1[:4])} ...",
+              hint, expected="the same particles and weights")
+
+        # degenerate weights: 3 particles share 0.9 of the weight
+        heavy = np.full(n, 0.1 / (n - 3))
+        heavy[[10, 500, 900]] = [0.5, 0.3, 0.1]
+        name = f"degenerate weights (N_eff = {ess(heavy):.1f}): resampled in proportion to the weights"
+        p2, w2 = call(r, name, parts, heavy, 1, threshold)
+        src = p2[:, 0].astype(int)
+        valid = bool(np.all(p2[:, 0] == np.round(p2[:, 0])) and np.all((src >= 0) & (src < n))
+                     and np.array_equal(p2, parts[np.clip(src, 0, n - 1)]))
+        if not valid:
+            r.add(name, False, "the new particles are not copies of the old ones",
+                  "resampling copies whole particles: new = particles[indices]")
+            raise _Stop
+        counts = np.bincount(src, minlength=n)[[10, 500, 900]]
+        se = np.sqrt(n * heavy[[10, 500, 900]] * (1 - heavy[[10, 500, 900]]))
+        ok = bool(np.all(np.abs(counts - n * heavy[[10, 500, 900]]) < 5 * se))
+        if ok:
+            hint = ""
+        elif np.array_equal(p2, parts):
+            hint = (f"N_eff = {ess(heavy):.1f} is far below threshold * N = {threshold * n:.0f}: resample now "
+                    "(compare effective_sample_size(weights) < threshold * len(weights))")
+        else:
+            hint = "draw the indices with probability proportional to the weights (e.g. localize.resample.systematic)"
+        r.add(name, ok, f"copies of the three heavy particles {counts.tolist()}", hint,
+              expected=f"{_fixed(n * heavy[[10, 500, 900]])} +- {_fixed(5 * se)}")
+        name = "after resampling every weight is 1/N"
+        ok = bool(np.allclose(w2, 1.0 / n, rtol=1e-9))
+        r.add(name, ok, f"weights {_fixed(w2[:4])} ..., sum {w2.sum():.4g}",
+              "the copies already represent the weights: set every weight to 1/N (keeping the old weights "
+              "counts them twice)", expected=f"all {1.0 / n:.4g}")
+        name = "threshold 0 never resamples"
+        p3, w3 = call(r, name, parts, heavy, 2, 0.0)
+        r.add(name, bool(np.array_equal(p3, parts) and np.allclose(w3, heavy, rtol=1e-9)),
+              "particles changed" if not np.array_equal(p3, parts) else "weights changed",
+              "use the threshold argument: resample only when N_eff < threshold * N (never when it is 0)",
+              expected="the same particles and weights")
+        a = call(r, "reproducible with the same rng", parts, heavy, 9, threshold)[0]
+        b = call(r, "reproducible with the same rng", parts, heavy, 9, threshold)[0]
+        r.add("reproducible with the same rng", bool(np.array_equal(a, b)), "",
+              "draw the resampling numbers from the rng argument, not from np.random")
+
+    return _run("resample_if_needed", body)
+
+
 # ---------------------------------------------------------------------------- MCL
 def mcl_step(fn: Callable) -> Report:
     """Check one MCL iteration ``fn(particles, u, ranges, angles, motion, sensor, rng) -> particles``.
@@ -965,8 +1104,94 @@ def world_to_cell(fn: Callable) -> Report:
         r.add("returns integers (usable as indices)", kind.kind in "iu", f"dtype {kind}",
               "numpy indexes with integers only: convert with .astype(int) after np.floor",
               expected="an integer dtype")
+        # left of and below the origin (off the map): the cell index is negative, -1 for a point less than
+        # one cell beyond the edge; truncation toward zero (astype(int) without floor) gives 0, a cell of the map
+        below = np.array([[-1.6, 2.1], [-1.2, 1.9], [-1.55, 1.95], [-2.1, 1.4]])
+        want_b = np.floor((below - origin) / res).astype(np.int64)[:, ::-1]
+        name = "a point left of or below the origin gets a negative index (floor, not truncation)"
+        out_b = _array(r, name, _call(r, name, fn, below.copy(), origin.copy(), res), want_b.shape)
+        ok_b = bool(np.array_equal(out_b, want_b))
+        if ok_b:
+            hint = ""
+        elif np.array_equal(out_b, np.trunc((below - origin) / res)[:, ::-1]):
+            hint = ("astype(int) (and int()) truncates toward zero: -0.4 cells becomes 0, but the point lies in cell "
+                    "-1. Take np.floor first, then astype(int)")
+        else:
+            hint = "i = floor((y - y0) / r), j = floor((x - x0) / r) holds on both sides of the origin"
+        r.add(name, ok_b, out_b.tolist(), hint, expected=want_b.tolist())
 
     return _run("world_to_cell", body)
+
+
+def ray_cast(fn: Callable) -> Report:
+    """Check a single-beam ray caster ``fn(grid, pose, angle, max_range) -> range`` (chapter 5).
+
+    ``pose = (x, y, theta)`` is the sensor pose, ``angle`` the beam's
+    direction relative to ``theta``; the range is the distance to where the
+    beam enters the first obstacle cell (``grid.obstacles``), or
+    ``max_range`` if it meets none within ``max_range`` or leaves the map
+    (the conventions of :mod:`localize.raycast`, whose cell walker
+    :func:`localize.raycast.cast_ray` is the reference). A caster that steps
+    along the beam is accepted within one cell of the exact range; the map has
+    walls one cell thick, which a step longer than a cell jumps over.
+    """
+    from .grid import OccupancyGrid
+    from .raycast import cast_ray
+
+    res = 0.1
+    data = np.zeros((60, 80))
+    data[:, 50] = 1.0                       # a wall one cell thick at x in [5.0, 5.1)
+    data[45, :40] = 1.0                     # and one at y in [4.5, 4.6), left part
+    grid = OccupancyGrid(data, res)
+
+    def one(r: Report, name: str, pose: NDArray, angle: float, max_range: float) -> float:
+        v = _array(r, name, _call(r, name, fn, grid, pose.copy(), float(angle), float(max_range)))
+        if v.size != 1:
+            r.add(name, False, f"returned {v.size} values", "return one range (a float) for one beam")
+            raise _Stop
+        return float(v.reshape(-1)[0])
+
+    def body(r: Report) -> None:
+        rng = np.random.default_rng(17)
+        m = 60
+        poses = np.column_stack([rng.uniform(1.0, 4.5, m), rng.uniform(0.5, 4.0, m), rng.uniform(-0.6, 0.6, m)])
+        angles = rng.uniform(-0.6, 0.6, m)              # towards the wall at x = 5.0, at many slants
+        max_range = 8.0
+        name = "ranges to a one-cell wall, within one cell of the exact range"
+        got = np.array([one(r, name, p, a, max_range) for p, a in zip(poses, angles)])
+        want = np.array([cast_ray(grid, p[0], p[1], p[2] + a, max_range) for p, a in zip(poses, angles)])
+        absolute = np.array([cast_ray(grid, p[0], p[1], a, max_range) for p, a in zip(poses, angles)])
+        err = got - want
+        ok = bool(np.all(np.isfinite(got)) and np.all(np.abs(err) <= res + 1e-9))
+        worst = int(np.argmax(np.abs(np.nan_to_num(err, nan=1e9))))
+        if ok:
+            hint = ""
+        elif np.any(err > res + 1e-9) and np.all(err > -res - 1e-9):
+            hint = (f"{int(np.sum(err > res + 1e-9))} of {m} beams went through the wall one cell thick: your "
+                    "step along the beam is longer than a cell, so it can jump over a thin wall. Step at most half "
+                    "a cell (or walk from cell to cell across every grid line, as localize.raycast.cast_ray does)")
+        elif np.allclose(got, absolute, atol=res):
+            hint = "the beam's direction in the world is theta + angle: you left out the sensor's heading"
+        elif np.all(np.abs(err) < 0.5 * res + 0.5 * res * np.sqrt(2)) and np.any(np.abs(err) > res):
+            hint = "the range is measured from the sensor's position (x, y), not from the centre of its cell"
+        else:
+            hint = ("walk along the beam from (x, y) in the direction theta + angle and return the distance at which "
+                    "you first enter a cell with grid.obstacles True (a row i, column j = grid.world_to_cell)")
+        r.add(name, ok, f"beam {worst}: {got[worst]:.3f} m", hint, expected=f"{want[worst]:.3f} m (+- {res} m)")
+
+        name = "max_range when nothing is within reach"
+        pose = np.array([1.0, 2.0, 0.0])
+        val = one(r, name, pose, 0.0, 3.0)              # the wall is 4 m away
+        r.add(name, abs(val - 3.0) < 1e-9, f"{val:.4g} m",
+              "stop walking after max_range and return max_range (no return from the beam)", expected="3 m")
+        name = "max_range when the beam leaves the map without a hit"
+        val = one(r, name, pose, np.pi, max_range)      # 1 m to the map's left edge, then open space
+        r.add(name, abs(val - max_range) < 1e-9, f"{val:.4g} m",
+              "a beam that leaves the map meets nothing the map knows of: return max_range (the book's convention), "
+              "not the distance to the edge, and never index outside the grid (a negative index wraps around "
+              "in numpy)", expected=f"{max_range:g} m")
+
+    return _run("ray_cast", body)
 
 
 def grid_update(fn: Callable) -> Report:
@@ -1286,6 +1511,10 @@ def predict_stop(fn: Callable) -> Report:
                     "cell (np.convolve's orientation, not np.correlate's)")
         if np.allclose(out, _predict_stop_ref(b, k, -off), atol=1e-9):
             return "you moved the wrong way: a positive offset moves towards higher cell indices"
+        if np.allclose(out, discrete.predict(b, k, offset=-off), atol=1e-9):
+            return ("you moved the wrong way, and your hallway wraps around: np.roll(b, shift) moves entries towards "
+                    "HIGHER indices for a positive shift (np.roll(b, offset), not np.roll(b, -offset)); and here mass "
+                    "must stop in the end cell instead of wrapping")
         return ("for every source cell src and kernel entry m, add belief[src] * kernel[m] to cell "
                 "min(max(src + offset + m - c, 0), n - 1)")
 

@@ -1,56 +1,47 @@
-"""The book's sliders work the way a reader uses them: JupyterLab in a real Chromium.
+"""The book's widgets work the way a reader uses them: JupyterLab in a real Chromium.
 
-What the test does, per notebook in ``TARGETS`` (and a tiny notebook it writes
-itself, with a negative control proving that the check can fail; it runs when
-the preface is missing or with ``LOCALIZE_BROWSER_ALL=1``):
+One JupyterLab server and one Chromium page for the whole module. What it does:
 
-1. Copies the book into a temporary root with outputs stripped from the
-   notebooks under test (the source files are never opened, so JupyterLab's
-   autosave cannot touch them; stripped prompts make "all cells ran" visible).
-2. Starts JupyterLab on 127.0.0.1 with a random port and token and private
-   Jupyter/IPython config, data, runtime and settings folders.
-3. Opens the notebook in Debian's ``/usr/bin/chromium`` driven by the
-   ``playwright`` Python package (Playwright's own browser download is not
-   used), waits for the kernel, clicks Run > Run All Cells and waits until
-   every code cell has an execution count and nothing was written to stderr.
-4. Finds the slider by its description label, presses ArrowRight (or
-   ArrowLeft at the end of the range) on its focused handle, checks that the
-   value shown in its readout changed, and asserts that the PNG of the
-   figure in the slider's cell changed while the figures of every other
-   widget in the notebook stayed byte-identical (no shared state between
-   widgets). Then it moves the slider back and asserts the figure returns to
-   byte-identical PNG (matplotlib PNGs carry no timestamp). Widget figures
-   are matplotlib output in an Output widget (``interact``,
-   ``interactive_output``; a ``data:`` URL) or an ``ipywidgets.Image``
-   (a ``blob:`` URL, read back with ``fetch``).
-5. Saves screenshots (whole page and the widget cell before/after) and the
-   server log under ``$PYTEST_ARTIFACTS/browser`` or a temporary folder whose
-   path is printed at the start of the run.
-6. Shuts down kernels and the server over the REST API (SIGTERM/SIGKILL as a
-   fallback) and kills any leftover process still referring to the temporary
-   root.
+1. Copies the book as a reader's clone has it (notebooks with their stored outputs, their
+   jupytext twins, the homework) and the book's ``jupyter_server_config.py`` and
+   ``jupyter_kernel_startup.py`` into a temporary root, and starts JupyterLab on it with the
+   README's ``--config`` (127.0.0.1, a random port and token, private Jupyter/IPython config,
+   data, runtime and settings folders).
+2. For every chapter that builds a widget (a widget builder called alone on a line of
+   ``book/src/NN_name.py``, the same rule as ``tests/test_widgets_display.py``): opens it, clears
+   all outputs, runs the cells up to its last widget (Run All Above, then that cell; chapters in
+   ``FULL_RUN``: Run > Run All Cells) and waits until every one of them has an execution count
+   and nothing was written to stderr.
+3. For EVERY widget of the chapter: moves one control (a slider one step with the keyboard, or
+   another toggle button; ``CONTROLS`` names the control where the first slider is not the
+   right one), asserts that the PNG of the figure in the widget's cell changed while the figures
+   of every other widget stayed byte-identical (no shared state), moves it back and asserts the
+   figure returns to the byte-identical PNG. Figures are matplotlib output in an Output widget
+   (a ``data:`` URL) or an ``ipywidgets.Image`` (a ``blob:`` URL, read back with ``fetch``).
+4. In the ``FULL_RUN`` chapters, checks that no solution's answer shows after Run All: the
+   output of every cell tagged ``solution`` is one closed "Output of the solution" disclosure.
+5. Tries to save (the chapters are read-only: Ctrl+S must not write), and at the end asserts
+   that no file of the copied clone changed, byte for byte: a reader's run leaves ``git
+   status`` clean.
+6. Saves screenshots (per widget before/after, the page after Run All) and the server log under
+   ``$PYTEST_ARTIFACTS/browser`` or a temporary folder whose path is printed; ``timings.txt``
+   ``timings-test_browser.txt`` there has the time of every phase.
 
-Skipped, with the reason, when ``playwright``, ``jupyterlab`` or Chromium
-(``/usr/bin/chromium`` or ``$LOCALIZE_CHROMIUM``) is missing. Install with
-``apt-get install -y chromium`` and ``pip install playwright``; do not run
-``playwright install``. Facts this relies on (selectors, pitfalls, timings)
-were measured on this machine kind; see the project notes on widgets in the
-browser. Marked ``browser``: deselect with ``-m "not browser"``.
-
-Time on this 2-core machine while other jobs kept it fully loaded: about
-60-80 s for the preface and the motion chapter (server 8 s, JupyterLab 5 s,
-per notebook kernel 2 s, Run All 5-18 s, slider 1 s); ``timings.txt`` in
-the artifacts folder has the breakdown of each run.
-
-Adding a chapter: append ``(notebook, slider label)`` to ``TARGETS`` (run by
-default) or ``EXTRA_TARGETS`` (run with ``LOCALIZE_BROWSER_ALL=1``). Targets
-whose notebook does not exist yet are skipped.
+A self-test notebook with a negative control (a slider its figure ignores must fail the
+check) runs with ``LOCALIZE_BROWSER_ALL=1``. Skipped, with the reason, when ``playwright``,
+``jupyterlab`` or Chromium (``/usr/bin/chromium`` or ``$LOCALIZE_CHROMIUM``) is missing. Install
+with ``apt-get install -y chromium`` and ``pip install playwright``; do not run ``playwright
+install``. Facts this relies on (selectors, pitfalls, timings) were measured on this machine
+kind; see the project notes on widgets in the browser. Marked ``browser``: deselect with
+``-m "not browser"``. ``LOCALIZE_BROWSER_CHAPTERS=03,07`` limits the run to those chapters.
 """
 
 from __future__ import annotations
 
 import base64
+import hashlib
 import os
+import re
 import secrets
 import shutil
 import signal
@@ -73,21 +64,34 @@ CHROMIUM = Path(os.environ.get("LOCALIZE_CHROMIUM", "/usr/bin/chromium"))
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--no-first-run", "--disable-quic", "--disable-sync"]
 
-# (notebook path relative to book/, description label of the slider to move).
-# The slider's figure must change; all other widgets' figures must not.
-# Each notebook costs a kernel start and a Run All (5-15 s on 2 cores), so the
-# default run covers the preface and one model chapter; LOCALIZE_BROWSER_ALL=1
-# adds EXTRA_TARGETS.
-TARGETS = [
-    ("00_preface.ipynb", "heading [°]"),
-    ("04_motion_models.ipynb", "alpha1"),  # the odometry widget's; the velocity widget also has one
-]
-EXTRA_TARGETS = [
-    ("01_bayes_filter.ipynb", "motion noise"),
-]
+# Widget cells: a builder of localize.widgets called alone at the start of a line of a chapter's source.
+_BUILDER_CALL = re.compile(r"^(\w+(?:_widget|_app|_player)|robot_on_map)\(", re.M)
+# The control moved per builder: ("slider", label), ("toggle", None) or ("button", (forward, back) labels);
+# default: the cell's first slider.
+CONTROLS = {
+    "mcl_player": ("slider", "step"),                 # the step slider only redraws (its run is cached)
+    "grid_resolution_widget": ("toggle", None),       # only toggle buttons
+    "tile_world_app": ("button", ("next cycle", "reset")),   # before the first reading no slider matters
+    "kidnap_widget": ("slider", "alpha_fast"),
+}
+# Chapters run with Run All, whose solutions are then checked (chapter 3: the answer the issue saw leak;
+# chapter 7: a solution with progress bars). The others run up to their last widget cell (Run > Run All
+# Above Selected Cell, then that cell), which saves about 40 % of the time.
+FULL_RUN = {"03", "07"}
+ONLY = [c.strip() for c in os.environ.get("LOCALIZE_BROWSER_CHAPTERS", "").split(",") if c.strip()]
+
+
+def widget_chapters() -> list[tuple[str, list[str]]]:
+    """(notebook name, builders of its widget cells in order) for every chapter with a widget."""
+    out = []
+    for src in sorted((BOOK / "src").glob("[0-9][0-9]_*.py")):
+        builders = _BUILDER_CALL.findall(src.read_text())
+        if builders and (not ONLY or src.stem[:2] in ONLY):
+            out.append((src.stem + ".ipynb", builders))
+    return out
+
+
 RUN_ALL_TARGETS = bool(os.environ.get("LOCALIZE_BROWSER_ALL"))
-if RUN_ALL_TARGETS:
-    TARGETS += EXTRA_TARGETS
 SELFTEST = "selftest.ipynb"  # written by the fixture; see _selftest_notebook()
 
 KERNEL_TIMEOUT_MS = 60_000
@@ -137,7 +141,9 @@ def artifacts(request, tmp_path_factory) -> Path:
     _report(request, f"\nbrowser test artifacts (screenshots, server log, timings): {path}")
     TIMINGS.clear()
     yield path
-    (path / "timings.txt").write_text("".join(f"{s:7.2f} s  {name}\n" for name, s in TIMINGS))
+    name = request.module.__name__.rsplit(".", 1)[-1]
+    (path / f"timings-{name}.txt").write_text("".join(f"{s:7.2f} s  {name}\n" for name, s in TIMINGS)
+                                               + f"{sum(s for _, s in TIMINGS):7.2f} s  total of the phases\n")
 
 
 def _selftest_notebook() -> nbformat.NotebookNode:
@@ -164,18 +170,19 @@ def _selftest_notebook() -> nbformat.NotebookNode:
     return nb
 
 
-def _stripped_copy(src: Path, dst: Path) -> None:
-    """Copy a notebook without outputs, widget state or jupytext pairing (so the .ipynb is what runs)."""
-    nb = nbformat.read(src, as_version=4)
-    for cell in nb.cells:
-        if cell.cell_type == "code":
-            cell.outputs = []
-            cell.execution_count = None
-    nb.metadata.pop("widgets", None)
-    nb.metadata.pop("jupytext", None)
-    nbformat.write(nb, dst)
-    dst.with_suffix(".py").unlink(missing_ok=True)
-    (dst.parent / "src" / (dst.stem + ".py")).unlink(missing_ok=True)   # the jupytext twin (book/src/)
+SERVER_CONFIG = "jupyter_server_config.py"      # the README's book command loads it with --config
+SNAPSHOT: dict[str, str] = {}                    # sha256 of every file of the copied book, before any test
+
+
+def _digests(folder: Path) -> dict[str, str]:
+    """sha256 of every file under ``folder`` that git would see (not checkpoints or language-server files)."""
+    out = {}
+    for f in sorted(folder.rglob("*")):
+        rel = f.relative_to(folder).as_posix()
+        if f.is_file() and not any(part in (".ipynb_checkpoints", ".virtual_documents", "__pycache__")
+                                   for part in f.relative_to(folder).parts):
+            out[rel] = hashlib.sha256(f.read_bytes()).hexdigest()
+    return out
 
 
 def _free_port() -> int:
@@ -215,12 +222,14 @@ def lab(tmp_path_factory, artifacts):
     tmp = tmp_path_factory.mktemp("lab")
     root, home = tmp / "root", tmp / "home"
     root.mkdir()
+    # the clone as a reader has it: notebooks with outputs, their twins, the server config of the README
     if BOOK.is_dir():
         shutil.copytree(BOOK, root / "book", ignore=shutil.ignore_patterns("_build", ".ipynb_checkpoints"))
-    for nb_name, _ in TARGETS:
-        if (BOOK / nb_name).exists():
-            _stripped_copy(BOOK / nb_name, root / "book" / nb_name)
+    for name in (SERVER_CONFIG, "jupyter_kernel_startup.py"):
+        shutil.copy2(ROOT / name, root / name)
     nbformat.write(_selftest_notebook(), root / SELFTEST)
+    SNAPSHOT.clear()
+    SNAPSHOT.update(_digests(root / "book"))
 
     env = dict(os.environ)
     for var, sub in [("JUPYTER_CONFIG_DIR", "config"), ("JUPYTER_DATA_DIR", "data"),
@@ -245,7 +254,8 @@ def lab(tmp_path_factory, artifacts):
     base = f"http://127.0.0.1:{port}"
     log = open(artifacts / "jupyterlab.log", "w")  # noqa: SIM115 - closed in teardown
     proc = subprocess.Popen(
-        [sys.executable, "-m", "jupyterlab", "--no-browser", "--allow-root", "--ServerApp.ip=127.0.0.1",
+        [sys.executable, "-m", "jupyterlab", f"--config={root / SERVER_CONFIG}", "--no-browser", "--allow-root",
+         "--ServerApp.ip=127.0.0.1",
          f"--ServerApp.port={port}", "--ServerApp.port_retries=0", f"--IdentityProvider.token={token}",
          f"--ServerApp.root_dir={root}", "--LabApp.news_url=None",
          "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
@@ -321,10 +331,7 @@ def page(lab_page, lab, artifacts, request):
         name = request.node.name.replace("/", "_")
         try:
             lab_page.screenshot(path=artifacts / f"{name}-final.png")
-            lab_page.evaluate("""async () => {
-                await window.jupyterapp.commands.execute('docmanager:save').catch(() => null);
-                await window.jupyterapp.commands.execute('application:close-all');
-            }""")
+            close_all(lab_page)
         except playwright_sync.Error:
             pass
         try:
@@ -340,8 +347,11 @@ def page(lab_page, lab, artifacts, request):
 _JS_KERNEL_IDLE = """() => [...document.querySelectorAll('.jp-StatusBar-TextItem')]
     .some(e => /^Python.*\\|\\s*Idle\\s*$/.test(e.textContent.trim()))"""
 
-# Run All finished: kernel idle, nothing queued, and every code cell numbered or an error was shown.
-_JS_RUN_ALL_FINISHED = """() => {
+# The notebook panel in front, and its cells by index (windowingMode "none": every cell is in the DOM).
+_JS_CELLS = "[...document.querySelectorAll('.jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook .jp-Cell')]"
+
+# Run All finished: kernel idle, nothing queued, and every code cell up to `upto` numbered or an error was shown.
+_JS_RUN_ALL_FINISHED = """(upto) => {
     const idle = [...document.querySelectorAll('.jp-StatusBar-TextItem')]
         .some(e => /^Python.*\\|\\s*Idle\\s*$/.test(e.textContent.trim()));
     const prompts = [...document.querySelectorAll('.jp-Notebook .jp-CodeCell .jp-InputPrompt')]
@@ -351,32 +361,33 @@ _JS_RUN_ALL_FINISHED = """() => {
     const nb = window.jupyterapp && window.jupyterapp.shell.currentWidget;
     const cells = nb && nb.content && nb.content.model ? nb.content.model.cells : null;
     let done = cells !== null && cells.length > 0;
-    for (let i = 0; cells !== null && i < cells.length; i++) {
+    for (let i = 0; cells !== null && i < Math.min(cells.length, upto + 1); i++) {
         const c = cells.get(i);
-        if (c.type === 'code' && (c.executionCount === null || c.executionCount === undefined)) done = false;
+        if (c.type === 'code' && c.sharedModel.getSource().trim()
+            && (c.executionCount === null || c.executionCount === undefined)) done = false;
     }
     const err = document.querySelector(".jp-Notebook [data-mime-type='application/vnd.jupyter.stderr']");
     return idle && !prompts.includes('[*]:') && (done || err !== null);
 }"""
 
-# Widget figures: matplotlib output shown in an Output widget (interact, interactive_output) as a
-# data: URL, or an ipywidgets.Image, shown from a blob: URL.
-_FIGURES = ".jp-Notebook .widget-output img, .jp-Notebook img.widget-image"
+# Widget figures: matplotlib output shown in an Output widget as a data: URL, or an
+# ipywidgets.Image, shown from a blob: URL.
+_FIGURES = ".widget-output img, img.widget-image"
 
-# Sources of every widget figure in the notebook, and whether each sits in slider idx's cell.
-_JS_WIDGET_SOURCES = """(idx) => {
-    const slider = document.querySelectorAll('.jp-Notebook .widget-slider')[idx];
-    const cell = slider.closest('.jp-Cell');
-    return [...document.querySelectorAll('%s')]
+# Every widget figure of the notebook: its source, and whether it sits in cell `idx`.
+_JS_SOURCES = """(idx) => {
+    const cell = %s[idx];
+    const nb = document.querySelector('.jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook');
+    return [...nb.querySelectorAll('%s')]
         .filter(i => /^(data:image\\/png|blob:)/.test(i.src))
         .map(i => ({own: cell.contains(i), src: i.src}));
-}""" % _FIGURES
+}""" % (_JS_CELLS, _FIGURES)
 
 # The same with the image bytes as a data: URL (blob: images are fetched and encoded).
-_JS_WIDGET_FIGURES = """async (idx) => {
-    const slider = document.querySelectorAll('.jp-Notebook .widget-slider')[idx];
-    const cell = slider.closest('.jp-Cell');
-    const imgs = [...document.querySelectorAll('%s')].filter(i => /^(data:image\\/png|blob:)/.test(i.src));
+_JS_FIGURES = """async (idx) => {
+    const cell = %s[idx];
+    const nb = document.querySelector('.jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook');
+    const imgs = [...nb.querySelectorAll('%s')].filter(i => /^(data:image\\/png|blob:)/.test(i.src));
     const out = [];
     for (const i of imgs) {
         let data = i.src;
@@ -389,14 +400,24 @@ _JS_WIDGET_FIGURES = """async (idx) => {
         out.push({own: cell.contains(i), src: data});
     }
     return out;
-}""" % _FIGURES
+}""" % (_JS_CELLS, _FIGURES)
 
 _JS_OWN_FIGURE_NOT = """([idx, old]) => {
-    const slider = document.querySelectorAll('.jp-Notebook .widget-slider')[idx];
-    const imgs = [...slider.closest('.jp-Cell').querySelectorAll('%s')]
-        .filter(i => /^(data:image\\/png|blob:)/.test(i.src));
+    const imgs = [...%s[idx].querySelectorAll('%s')].filter(i => /^(data:image\\/png|blob:)/.test(i.src));
     return imgs.length > 0 && imgs.map(i => i.src).join('|') !== old;
-}""" % _FIGURES.replace(".jp-Notebook ", "")
+}""" % (_JS_CELLS, _FIGURES)
+
+# What a reader sees of each solution cell's output after Run All.
+_JS_SOLUTION_OUTPUTS = """(indices) => indices.map(idx => {
+    const cell = %s[idx];
+    const area = cell.querySelector('.jp-OutputArea');
+    const details = area ? [...area.querySelectorAll('details')] : [];
+    const shown = area ? [...area.querySelectorAll('.jp-OutputArea-output')]
+        .filter(o => !o.querySelector('details')).map(o => o.innerText.trim()).filter(t => t) : [];
+    const hiddenArea = cell.querySelector('.jp-OutputPlaceholder') !== null;
+    return {idx, details: details.length, open: details.some(d => d.open), shown, hiddenArea,
+            summary: details.map(d => (d.querySelector('summary') || {innerText: ''}).innerText)};
+})""" % _JS_CELLS
 
 
 def _png(src: str) -> bytes:
@@ -407,21 +428,21 @@ def _png(src: str) -> bytes:
 
 
 def _figures(page, idx: int) -> tuple[list[bytes], list[bytes]]:
-    """(own figures, other widgets' figures) as PNG bytes, in page order."""
+    """(figures of cell idx, other widgets' figures) as PNG bytes, in page order."""
     try:
-        figs = page.evaluate(_JS_WIDGET_FIGURES, idx)
+        figs = page.evaluate(_JS_FIGURES, idx)
     except playwright_sync.Error:  # a blob: image was replaced while being read: settle and retry once
         _settle(page, idx)
-        figs = page.evaluate(_JS_WIDGET_FIGURES, idx)
+        figs = page.evaluate(_JS_FIGURES, idx)
     return [_png(f["src"]) for f in figs if f["own"]], [_png(f["src"]) for f in figs if not f["own"]]
 
 
 def _settle(page, idx: int) -> None:
-    """Wait until the kernel is idle and the slider's figures are unchanged over two polls 0.3 s apart."""
+    """Wait until the kernel is idle and the figures are unchanged over two polls 0.3 s apart."""
     last = None
     for _ in range(80):
         page.wait_for_function(_JS_KERNEL_IDLE, timeout=REDRAW_TIMEOUT_MS)
-        now = page.evaluate(_JS_WIDGET_SOURCES, idx)
+        now = page.evaluate(_JS_SOURCES, idx)
         if now == last:
             return
         last = now
@@ -429,90 +450,151 @@ def _settle(page, idx: int) -> None:
     raise AssertionError("the widget figures kept changing for 24 s")
 
 
-def open_and_run_all(page, rel: str) -> None:
-    """Open ``rel`` (relative to the server root) in JupyterLab and run all cells; fail on errors."""
+def close_all(page) -> None:
+    """Close every document without saving (a run chapter is dirty; chapters are read-only anyway)."""
+    page.evaluate("""async () => {
+        const app = window.jupyterapp;
+        for (const w of [...app.shell.widgets('main')]) {
+            if (w.context && w.context.model) w.context.model.dirty = false;
+        }
+        await app.commands.execute('application:close-all');
+    }""")
+    for button in page.locator(".jp-Dialog .jp-mod-reject").all():   # a dialog left open: dismiss it
+        button.click()
+
+
+def open_and_run_all(page, rel: str, upto: int | None = None) -> None:
+    """Open ``rel`` (relative to the server root), clear its outputs, run all cells (or cells 0..upto); fail on errors."""
     with _phase(f"{rel}: open the notebook"):
         page.evaluate("async (path) => { await window.jupyterapp.commands.execute('docmanager:open', {path}); }",
                       rel)
-        page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=KERNEL_TIMEOUT_MS)
+        page.wait_for_selector(".jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook .jp-Cell",
+                               timeout=KERNEL_TIMEOUT_MS)
     with _phase(f"{rel}: kernel start until idle"):
         page.wait_for_function(_JS_KERNEL_IDLE, timeout=KERNEL_TIMEOUT_MS)
-    with _phase(f"{rel}: Run All"):
-        page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click()
-        page.locator("li.lm-Menu-item[data-command='runmenu:run-all']").click()
-        page.wait_for_function(_JS_RUN_ALL_FINISHED, timeout=RUN_ALL_TIMEOUT_MS, polling=250)
+    with _phase(f"{rel}: clear outputs, Run All" + ("" if upto is None else f" up to cell {upto}")):
+        page.evaluate("async () => { await window.jupyterapp.commands.execute('notebook:clear-all-cell-outputs'); }")
+        if upto is None:
+            page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click()
+            page.locator("li.lm-Menu-item[data-command='runmenu:run-all']").click()
+        else:          # Run All Above the cell after `upto`, as a reader who stops at the widget would
+            page.evaluate("""async (k) => { const app = window.jupyterapp;
+                app.shell.currentWidget.content.activeCellIndex = k;
+                await app.commands.execute('notebook:run-all-above'); }""", upto + 1)
+        page.wait_for_function(_JS_RUN_ALL_FINISHED, arg=10**9 if upto is None else upto,
+                               timeout=RUN_ALL_TIMEOUT_MS, polling=250)
     stderr = page.locator(".jp-Notebook [data-mime-type='application/vnd.jupyter.stderr']").all_inner_texts()
     assert not stderr, f"{rel}: cells wrote to stderr (error or warning):\n" + "\n---\n".join(stderr)[:4000]
-    prompts = page.locator(".jp-Notebook .jp-CodeCell .jp-InputPrompt").all_inner_texts()
-    shown = [p for p in prompts if p.strip()]  # a cell with collapsed source (a hidden solution) shows none
-    assert shown and all(p.strip().startswith("[") and p.strip()[1:-2].isdigit() for p in shown), prompts
 
 
-def slider_index(page, label: str | None) -> int:
-    """Index (in page order) of the first slider with description ``label`` (None: the first slider)."""
-    labels = [t.strip() for t in page.locator(".jp-Notebook .widget-slider").evaluate_all(
+def _cell(page, idx: int):
+    return page.locator(".jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook .jp-Cell").nth(idx)
+
+
+def _sliders(page, idx: int):
+    return _cell(page, idx).locator(".widget-slider")
+
+
+def _slider(page, idx: int, label: str | None):
+    """The slider labelled ``label`` in cell ``idx`` (None: the first one)."""
+    sliders = _sliders(page, idx)
+    labels = [t.strip() for t in sliders.evaluate_all(
         "els => els.map(e => (e.querySelector('label.widget-label') || {}).textContent || '')")]
-    assert labels, "no ipywidgets slider was rendered in the notebook"
+    assert labels, f"cell {idx} shows no slider"
     if label is None:
-        return 0
-    assert label in labels, f"no slider labelled {label!r}; sliders found: {labels}"
-    return labels.index(label)
+        return sliders.nth(0), labels[0]
+    assert label in labels, f"no slider labelled {label!r} in cell {idx}; sliders found: {labels}"
+    return sliders.nth(labels.index(label)), label
 
 
-def slider_value(page, idx: int) -> str:
-    """The value slider ``idx`` shows: its readout, else aria-valuetext (aria-valuenow is rounded)."""
-    return page.locator(".jp-Notebook .widget-slider").nth(idx).evaluate("""s => {
+def _slider_value(slider) -> str:
+    """The value a slider shows: its readout, else aria-valuetext (aria-valuenow is rounded)."""
+    return slider.evaluate("""s => {
         const r = s.querySelector('.widget-readout');
         const h = s.querySelector('.noUi-handle');
         return (r && r.textContent.trim()) || h.getAttribute('aria-valuetext') || h.getAttribute('aria-valuenow');
     }""")
 
 
-def move_slider(page, idx: int, key: str, timeout: float = REDRAW_TIMEOUT_MS) -> tuple[str, str]:
-    """Press ``key`` on slider ``idx``'s handle; wait for its figure to redraw. Returns (old, new) value."""
-    handle = page.locator(".jp-Notebook .widget-slider").nth(idx).locator(".noUi-handle").first
-    before = slider_value(page, idx)
-    old = "|".join(f["src"] for f in page.evaluate(_JS_WIDGET_SOURCES, idx) if f["own"])
-    handle.focus()
-    page.keyboard.press(key)
-    after = slider_value(page, idx)
-    assert after != before, f"pressing {key} did not move the slider (value {before})"
+def _wait_for_new_figure(page, idx: int, old: str, what: str, timeout: float = REDRAW_TIMEOUT_MS) -> None:
     try:
         page.wait_for_function(_JS_OWN_FIGURE_NOT, arg=[idx, old], timeout=timeout, polling=100)
     except playwright_sync.TimeoutError as exc:
-        raise FigureDidNotChange(f"moving the slider {before} -> {after} did not change its figure "
-                                 f"within {timeout / 1000:.0f} s") from exc
+        raise FigureDidNotChange(f"{what} did not change the figure within {timeout / 1000:.0f} s") from exc
     _settle(page, idx)
+
+
+def _own_sources(page, idx: int) -> str:
+    return "|".join(f["src"] for f in page.evaluate(_JS_SOURCES, idx) if f["own"])
+
+
+def press_slider(page, idx: int, slider, key: str, timeout: float = REDRAW_TIMEOUT_MS) -> tuple[str, str]:
+    """Press ``key`` on a slider's handle (what a reader's keyboard does); wait for cell idx's figure to redraw."""
+    handle = slider.locator(".noUi-handle").first
+    before, old = _slider_value(slider), _own_sources(page, idx)
+    handle.focus()
+    page.keyboard.press(key)
+    after = _slider_value(slider)
+    assert after != before, f"pressing {key} did not move the slider (value {before})"
+    _wait_for_new_figure(page, idx, old, f"moving the slider {before} -> {after}", timeout)
     return before, after
 
 
-def check_slider(page, idx: int, shots: Path) -> None:
-    """Move slider ``idx`` one step and back; its figure changes then returns, others never change."""
-    handle = page.locator(".jp-Notebook .widget-slider").nth(idx).locator(".noUi-handle").first
-    cell_idx = page.evaluate("""(idx) => {
-        const s = document.querySelectorAll('.jp-Notebook .widget-slider')[idx];
-        return [...document.querySelectorAll('.jp-Notebook .jp-Cell')].indexOf(s.closest('.jp-Cell'));
-    }""", idx)
-    cell = page.locator(".jp-Notebook .jp-Cell").nth(cell_idx)
+def click_toggle(page, idx: int, button) -> None:
+    old = _own_sources(page, idx)
+    button.click()
+    _wait_for_new_figure(page, idx, old, f"clicking {button.inner_text()!r}")
+
+
+def check_widget(page, idx: int, control: tuple[str, str | None], shots: Path) -> str:
+    """Move one control of the widget in cell ``idx`` and back: its figure changes then returns; others never change.
+
+    Returns a description of the control moved.
+    """
+    cell = _cell(page, idx)
+    cell.scroll_into_view_if_needed()
     _settle(page, idx)
     own0, others0 = _figures(page, idx)
-    assert own0, "the slider's cell shows no PNG figure after Run All"
-    cell.screenshot(path=shots / "widget-before.png")
-    at_end = handle.get_attribute("aria-valuenow") == handle.get_attribute("aria-valuemax")
-    forward, back = ("ArrowLeft", "ArrowRight") if at_end else ("ArrowRight", "ArrowLeft")
-
-    with _phase("slider: move one step, redraw, settle"):
-        move_slider(page, idx, forward)
+    assert own0, f"the widget in cell {idx} shows no figure after Run All"
+    cell.screenshot(path=shots / f"cell{idx:03d}-before.png")
+    kind, label = control
+    if kind == "toggle":
+        buttons = cell.locator(".widget-toggle-button")
+        active = [k for k in range(buttons.count()) if "mod-active" in (buttons.nth(k).get_attribute("class") or "")]
+        assert active and buttons.count() > 1, f"cell {idx}: no toggle buttons to switch"
+        other = next(k for k in range(buttons.count()) if k not in active)
+        desc = f"toggle {buttons.nth(active[0]).inner_text()!r} -> {buttons.nth(other).inner_text()!r}"
+        with _phase(f"cell {idx}: {desc}, redraw, settle"):
+            click_toggle(page, idx, buttons.nth(other))
+        forward = lambda: None  # noqa: E731 - already done
+        back = lambda: click_toggle(page, idx, buttons.nth(active[0]))  # noqa: E731
+    elif kind == "button":
+        fwd_label, back_label = label
+        desc = f"button {fwd_label!r}, then {back_label!r}"
+        with _phase(f"cell {idx}: {desc}, redraw, settle"):
+            click_toggle(page, idx, cell.locator(".widget-button", has_text=fwd_label).first)
+        forward = lambda: None  # noqa: E731
+        back = lambda: click_toggle(page, idx, cell.locator(".widget-button", has_text=back_label).first)  # noqa: E731
+    else:
+        slider, name = _slider(page, idx, label)
+        handle = slider.locator(".noUi-handle").first
+        at_end = handle.get_attribute("aria-valuenow") == handle.get_attribute("aria-valuemax")
+        fwd, bwd = ("ArrowLeft", "ArrowRight") if at_end else ("ArrowRight", "ArrowLeft")
+        with _phase(f"cell {idx}: slider {name!r} one step, redraw, settle"):
+            old, new = press_slider(page, idx, slider, fwd)
+        desc = f"slider {name!r} {old} -> {new}"
+        forward = lambda: None  # noqa: E731
+        back = lambda: press_slider(page, idx, slider, bwd)  # noqa: E731
+    forward()
     own1, others1 = _figures(page, idx)
-    cell.screenshot(path=shots / "widget-after.png")
-    page.screenshot(path=shots / "page-after.png")
-    assert own1 != own0, "the figure's PNG did not change"
-    assert others1 == others0, "moving one slider changed another widget's figure (shared state?)"
-
-    move_slider(page, idx, back)
+    cell.screenshot(path=shots / f"cell{idx:03d}-after.png")
+    assert own1 != own0, f"cell {idx}: {desc}: the figure's PNG did not change"
+    assert others1 == others0, f"cell {idx}: {desc} changed another widget's figure (shared state?)"
+    back()
     own2, others2 = _figures(page, idx)
-    assert own2 == own0, "moving the slider back did not give back the byte-identical figure"
-    assert others2 == others0, "moving one slider changed another widget's figure (shared state?)"
+    assert own2 == own0, f"cell {idx}: {desc} and back did not give back the byte-identical figure"
+    assert others2 == others0, f"cell {idx}: {desc} changed another widget's figure (shared state?)"
+    return desc
 
 
 def _close_sessions(base: str, token: str) -> None:
@@ -526,30 +608,73 @@ def _close_sessions(base: str, token: str) -> None:
         _request(f"{base}/api/sessions/{s['id']}", "DELETE", token)
 
 
+def widget_cells(notebook: Path, builders: list[str]) -> list[tuple[int, str]]:
+    """(cell index, builder) of the cells that build a widget, in order."""
+    nb = nbformat.read(notebook, as_version=4)
+    out = []
+    for k, cell in enumerate(nb.cells):
+        if cell.cell_type == "code":
+            out += [(k, b) for b in _BUILDER_CALL.findall(cell.source)]
+    assert [b for _, b in out] == builders, f"{notebook.name}: widget cells {out} do not match its source {builders}"
+    return out
+
+
+def solution_cells(notebook: Path) -> list[int]:
+    nb = nbformat.read(notebook, as_version=4)
+    return [k for k, c in enumerate(nb.cells) if c.cell_type == "code" and "solution" in c.metadata.get("tags", [])]
+
+
 # ---------------------------------------------------------------- tests
 
 
-@pytest.mark.skipif((BOOK / "00_preface.ipynb").exists() and not RUN_ALL_TARGETS,
-                    reason="the preface covers the harness; LOCALIZE_BROWSER_ALL=1 adds this self-test "
+@pytest.mark.skipif(not RUN_ALL_TARGETS,
+                    reason="the chapters cover the harness; LOCALIZE_BROWSER_ALL=1 adds this self-test "
                            "and its negative control")
 def test_selftest_notebook_slider_redraws_only_its_own_figure(page, artifacts):
     """The harness on a notebook it wrote: a real redraw passes, a slider that changes nothing fails."""
     shots = artifacts / "selftest"
     shots.mkdir(exist_ok=True)
     open_and_run_all(page, SELFTEST)
-    check_slider(page, slider_index(page, "freq"), shots)
+    check_widget(page, 1, ("slider", "freq"), shots)
     # Negative control: the test must be able to fail.
+    slider, _ = _slider(page, 2, "ignored")
     with pytest.raises(FigureDidNotChange):
-        move_slider(page, slider_index(page, "ignored"), "ArrowRight", timeout=1_500)
+        press_slider(page, 2, slider, "ArrowRight", timeout=1_500)
 
 
-@pytest.mark.parametrize("notebook,label", [
-    pytest.param(nb, label, id=nb.removesuffix(".ipynb"),
-                 marks=pytest.mark.skipif(not (BOOK / nb).exists(), reason=f"book/{nb} does not exist yet"))
-    for nb, label in TARGETS])
-def test_chapter_slider_redraws_its_figure(page, artifacts, notebook, label):
+@pytest.mark.parametrize("notebook,builders", [
+    pytest.param(nb, builders, id=nb[:2]) for nb, builders in widget_chapters()])
+def test_every_widget_of_the_chapter_redraws_and_no_answer_shows(page, lab, artifacts, notebook, builders):
     shots = artifacts / notebook.removesuffix(".ipynb")
     shots.mkdir(exist_ok=True)
-    open_and_run_all(page, f"book/{notebook}")
-    page.screenshot(path=shots / "page-after-run-all.png")
-    check_slider(page, slider_index(page, label), shots)
+    cells = widget_cells(BOOK / notebook, builders)
+    n_cells = len(nbformat.read(BOOK / notebook, as_version=4).cells)
+    full = notebook[:2] in FULL_RUN or cells[-1][0] == n_cells - 1
+    open_and_run_all(page, f"book/{notebook}", upto=None if full else cells[-1][0])
+    page.screenshot(path=shots / "page-after-run-all.png", full_page=False)
+    moved = []
+    for idx, builder in cells:
+        moved.append(f"{builder}: " + check_widget(page, idx, CONTROLS.get(builder, ("slider", None)), shots))
+    (shots / "controls-moved.txt").write_text("\n".join(moved) + "\n")
+    # Run All showed no answer: every solution's output is one closed disclosure, or hidden
+    sols = solution_cells(BOOK / notebook) if full else []
+    seen = page.evaluate(_JS_SOLUTION_OUTPUTS, sols)
+    for s in seen:
+        assert not s["open"] and not s["shown"], f"{notebook}: solution cell {s['idx']} shows its answer: {s}"
+        assert s["details"] <= 1 and all("Output of the solution" in t for t in s["summary"]), s
+    if seen:
+        _cell(page, sols[0]).scroll_into_view_if_needed()
+        page.screenshot(path=shots / "first-solution-after-run-all.png")
+    # Ctrl+S on a run chapter: read-only, nothing is written (checked byte for byte at the end)
+    _cell(page, 0).click()
+    page.keyboard.press("Escape")
+    page.keyboard.press("Control+s")
+    page.get_by_text("is read-only").first.wait_for(timeout=10_000)
+
+
+def test_the_readers_clone_is_unchanged(lab):
+    """After every chapter above was run, its widgets moved and a save tried: no file of the book changed."""
+    assert SNAPSHOT, "the lab fixture took no snapshot"
+    now = _digests(lab[2] / "book")
+    changed = sorted(k for k in set(now) | set(SNAPSHOT) if now.get(k) != SNAPSHOT.get(k))
+    assert not changed, f"files changed, added or removed by reading the book: {changed}"

@@ -726,3 +726,96 @@ def test_new_checks_show_the_expected_value_next_to_the_students():
         for v in r.failures:
             assert v.expected, f"{r.subject}: {v.name!r} shows {v.detail!r} without the expected value"
         assert "expected:" in str(r)
+
+
+# ------------------------------------------------------------------ issue 40: classic mistakes the checks missed
+def test_scan_log_likelihood_of_the_product_underflows_on_a_wrong_pose():
+    """log(prod(p)) is right on a fitting scan but -inf where the product is below the smallest float."""
+    b = _beam()
+
+    def log_of_product(ranges, expected, prm):
+        p = np.array([b(z, e, prm) for z, e in zip(ranges, expected)])
+        with np.errstate(divide="ignore"):
+            return float(np.log(np.prod(p)))
+
+    r = check.scan_log_likelihood(log_of_product)
+    fails_with(r, "you took the log of the product")
+    assert [v.name for v in r.failures] == [
+        "a scan at a wrong pose: finite, no underflow (log of the product = sum of the logs)"], r
+    assert check.scan_log_likelihood(_scan("log"))
+
+
+def _adaptive(always=False, never=False, keep_weights=False, threshold_arg=True):
+    def fn(particles, weights, rng, threshold):
+        w = np.asarray(weights, float) / np.sum(weights)
+        thr = threshold if threshold_arg else 0.5
+        if never or not (always or resample.effective_sample_size(w) < thr * len(w)):
+            return particles, w
+        idx = resample.systematic(w, rng)
+        return particles[idx], (w[idx] / w[idx].sum() if keep_weights else np.full(len(w), 1.0 / len(w)))
+
+    return fn
+
+
+def test_resample_if_needed():
+    assert check.resample_if_needed(_adaptive())
+    always = check.resample_if_needed(_adaptive(always=True))
+    fails_with(always, "resampling at every step")
+    assert [v.name.split(" (")[0] for v in always.failures] == ["even weights", "threshold 0 never resamples"], always
+    fails_with(check.resample_if_needed(_adaptive(never=True)), "resample now")
+    fails_with(check.resample_if_needed(_adaptive(keep_weights=True)), "set every weight to 1/N")
+    fails_with(check.resample_if_needed(_adaptive(threshold_arg=False)), "use the threshold argument")
+    fails_with(check.resample_if_needed(lambda p, w, rng, t: p), "return the pair")
+
+
+def _ray(step=0.05, heading=True, leave="max"):
+    """A student's ray marcher: walk along the beam in steps of ``step`` metres."""
+    def fn(grid, pose, angle, max_range):
+        x, y, th = pose
+        a = th + angle if heading else angle
+        d = 0.0
+        while d < max_range:
+            px, py = x + d * np.cos(a), y + d * np.sin(a)
+            if not grid.contains(np.array([px, py])):
+                return max_range if leave == "max" else d
+            i, j = grid.world_to_cell(np.array([px, py]))
+            if grid.obstacles[i, j]:
+                return d
+            d += step
+        return max_range
+
+    return fn
+
+
+def test_ray_cast():
+    from localize.raycast import cast_ray
+
+    assert check.ray_cast(lambda g, p, a, m: cast_ray(g, p[0], p[1], p[2] + a, m))   # the exact cell walker
+    assert check.ray_cast(_ray(step=0.05))                   # half a cell: within one cell of the exact range
+    thin = check.ray_cast(_ray(step=0.15))                   # a step longer than a cell jumps over thin walls
+    fails_with(thin, "went through the wall one cell thick")
+    assert [v.name for v in thin.failures] == ["ranges to a one-cell wall, within one cell of the exact range"], thin
+    fails_with(check.ray_cast(_ray(heading=False)), "theta + angle")
+    fails_with(check.ray_cast(_ray(leave="edge")), "leaves the map")
+
+
+def test_world_to_cell_truncation_left_of_the_origin():
+    trunc = check.world_to_cell(_world_to_cell(rounding=np.trunc))      # astype(int) of (p - origin) / r
+    fails_with(trunc, "truncates toward zero")
+    assert len(trunc.failures) == 1, trunc                              # right everywhere inside the map
+
+
+def test_np_roll_the_wrong_way_says_so():
+    fails_with(check.histogram_move(lambda b, s, f: np.roll(b, (-s[0], -s[1]), axis=(0, 1))), "moved the wrong way")
+    fails_with(check.predict_stop(lambda b, k, off: discrete.predict(b, k, offset=-off)), "moved the wrong way")
+
+
+def test_sample_odometry_shared_noise_and_variance_as_std():
+    def shared(poses, u, alphas, rng):                      # one noise draw for all particles
+        one = motion.sample_odometry(poses[:1], u, alphas, rng)
+        return np.repeat(one, len(poses), axis=0) + np.c_[poses[:, :2] - poses[:1, :2], np.zeros(len(poses))]
+
+    fails_with(check.sample_odometry(shared), "same noise (zero spread)")
+    as_std = check.sample_odometry(_sampler(var_is_std=True))
+    # every motion case, the backwards one too, names the mistake (not "wrap the angles")
+    assert len(as_std.failures) == 3 and all("as a standard deviation" in v.hint for v in as_std.failures), as_std

@@ -31,7 +31,21 @@ def test_hallway_bounded_world():
 
 def test_tile_world_run_reproduces_worked_example():
     b, truth, z = wh.tile_world_run(0.85, 0.0, 1)
-    assert z == ["blue"] and set(np.unique(b.round(3))) == {0.001, 0.019, 0.106}
+    # the first cycle only senses: 5 blue tiles of 35 get 0.85 / (5 * 0.85 + 30 * 0.15), the others 0.15 / ...
+    assert z == ["blue"] and set(np.unique(b.round(3))) == {0.017, 0.097}
+    # a cycle ends on a reading: after 3 cycles (blue, left, green, up, red) the robot is on the tile the
+    # worked example circles, (0, 3), and the belief is the example's last table computed by localize
+    from localize import histogram as hist
+    from localize.maps import tile_world
+
+    w = tile_world()
+    ref = hist.sense(np.full(w.shape, 1.0 / w.size), w, "blue", 0.85, 0.15)
+    ref = hist.sense(hist.move(ref, "left", fill=0.001), w, "green", 0.85, 0.15)
+    ref = hist.sense(hist.move(ref, "up", fill=0.001), w, "red", 0.85, 0.15)
+    b, truth, z = wh.tile_world_run(0.85, 0.0, 3)
+    assert z == ["blue", "green", "red"] and truth == (0, 3)
+    np.testing.assert_allclose(b, ref, rtol=1e-12)
+    assert tuple(np.unravel_index(b.argmax(), b.shape)) == (0, 3)
     b, truth, z = wh.tile_world_run(0.85, 0.0, len(wh.TILE_PATH))
     assert tuple(np.unravel_index(b.argmax(), b.shape)) == truth
 
@@ -71,7 +85,7 @@ def test_apps_build_and_buttons_step():
     assert tile.stepper.n_steps == 2
     for _ in range(20):
         tile.stepper.step()     # the button's callback, without 20 redraws
-    assert tile.stepper.n_steps == len(wh.TILE_PATH)
+    assert tile.stepper.n_steps == len(wh.TILE_PATH) + 1
     reset_button.click()
     assert tile.stepper.n_steps == 0
     tile.children[0].children[0].value = 0.7   # slider redraw does not raise

@@ -20,6 +20,11 @@ Cells tagged ``solution`` are made collapsible in both places where students rea
   CommonMark requires for the inside to be parsed as markdown, and headings
   inside become bold lines (a heading inside would break the page's sections).
 
+JupyterLab shows a code cell's output again when the cell runs (``outputs_hidden`` is reset), so
+after Run All the answers would be printed under the exercises: the kernels of the book's
+Jupyter server (``jupyter_server_config.py``) fold the output of every cell tagged ``solution``
+into a closed "Output of the solution" disclosure (:mod:`localize.widgets._solutions`).
+
 Cells in the older MyST admonition form are converted. The notebook and its
 jupytext twin are updated together, without re-executing anything, so stored
 outputs are kept. ``tests/test_book.py`` checks every chapter with

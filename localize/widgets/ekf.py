@@ -23,7 +23,7 @@ from ..compare import FAIL_THRESHOLD, run_filters, scenario
 from ..metrics import position_error
 from ..plot import draw_poses
 from ..plot.ekf import FILTER_COLORS, draw_gaussian_belief, draw_landmarks
-from . import with_hint
+from . import figure_output, with_hint
 
 __all__ = ["noise_runs", "noise_figure", "noise_widget", "DEMOS", "DEMO_VARIANTS"]
 
@@ -150,7 +150,6 @@ def noise_widget(**defaults: Any):
     Returns the ipywidgets container (display it as the last line of a cell).
     """
     import ipywidgets as W
-    import matplotlib.pyplot as plt
 
     # the widget's defaults keep a redraw under 100 ms (benchmarks/bench_widgets.py); the chapter's
     # static figures call noise_figure() with its larger defaults (4 seeds x 40 steps, 500 particles)
@@ -165,11 +164,10 @@ def noise_widget(**defaults: Any):
     anon = W.Checkbox(value=p["anonymous"], description="landmarks look alike")
 
     def show(heading_noise, sigma_bearing, sense_every, n_particles, seed, anonymous):
-        noise_figure(heading_noise, sigma_bearing, sense_every, n_particles, n_seeds=p["n_seeds"],
-                     n_steps=p["n_steps"], seed=seed, anonymous=anonymous)
-        plt.show()
+        return noise_figure(heading_noise, sigma_bearing, sense_every, n_particles, n_seeds=p["n_seeds"],
+                            n_steps=p["n_steps"], seed=seed, anonymous=anonymous)
 
-    out = W.interactive_output(show, dict(heading_noise=hn, sigma_bearing=sb, sense_every=se, n_particles=n,
+    out = figure_output(show, dict(heading_noise=hn, sigma_bearing=sb, sense_every=se, n_particles=n,
                                           seed=seed, anonymous=anon))
     return with_hint(W.VBox([W.HBox([hn, sb, se]), W.HBox([n, seed, anon]), out]))
 

@@ -20,13 +20,14 @@ from .. import discrete
 from .. import histogram as hist
 from ..maps import hallway, tile_world
 from ..plot.histogram import draw_bars, draw_tiles
-from . import interactive_app, with_hint
+from . import interactive_app, show_figure, with_hint
 
 __all__ = ["hallway_run", "hallway_figure", "tile_world_run", "tile_world_figure", "hallway_app",
            "tile_world_app", "TILE_START", "TILE_PATH", "DEMOS", "DEMO_VARIANTS"]
 
-#: Where the robot of the tile-world demo starts (row, col), and the moves it makes.
-#: The first three readings (blue, green, red) are those of the chapter's worked example.
+#: Where the robot of the tile-world demo starts (row, col), and the moves it makes between readings.
+#: The first three readings (blue, green, red), with the moves left and up between them, are the
+#: chapter's worked example.
 TILE_START = (1, 4)
 TILE_PATH = ["left", "up", "right", "right", "down", "down", "left", "down", "left", "left"]
 
@@ -106,7 +107,14 @@ def hallway_figure(p_hit: float = 0.75, motion_noise: float = 0.2, n_steps: int 
 
 
 def tile_world_run(p_hit: float = 0.85, motion_noise: float = 0.0, n_steps: int = 1, fill: float = 0.001):
-    """Run the tile world for ``n_steps`` cycles of :data:`TILE_PATH` (sense the true colour, then move).
+    """Run the tile world for ``n_steps`` cycles along :data:`TILE_PATH`: the belief after the ``n_steps``-th reading.
+
+    Like the worked example and the hallway (:func:`hallway_run`), a cycle
+    ends on a reading: the first cycle only senses the colour under the
+    robot, each later one first makes the next move of :data:`TILE_PATH`,
+    then senses. So after 3 cycles the robot has read blue, moved left, read
+    green, moved up and read red, and the belief is the example's last table
+    (``n_steps`` from 0, the uniform prior, to ``len(TILE_PATH) + 1``).
 
     ``motion_noise`` is the chance of not reaching the intended tile, split
     as in the chapter: 80 % of it diagonally ahead, 20 % staying put (0.5
@@ -117,25 +125,29 @@ def tile_world_run(p_hit: float = 0.85, motion_noise: float = 0.0, n_steps: int 
     --------
     >>> b, truth, z = tile_world_run(n_steps=3)
     >>> truth, z
-    ((0, 4), ['blue', 'green', 'red'])
+    ((0, 3), ['blue', 'green', 'red'])
+    >>> tuple(int(i) for i in np.unravel_index(b.argmax(), b.shape)), round(float(b.max()), 3)
+    ((0, 3), 0.501)
     """
     p_hit = _check_unit(p_hit, "p_hit")
     motion_noise = _check_unit(motion_noise, "motion_noise")
     n_steps = int(n_steps)
-    if not 0 <= n_steps <= len(TILE_PATH):
-        raise ValueError(f"n_steps must lie in [0, {len(TILE_PATH)}]; got {n_steps}")
+    if not 0 <= n_steps <= len(TILE_PATH) + 1:
+        raise ValueError(f"n_steps must lie in [0, {len(TILE_PATH) + 1}] (readings along TILE_PATH); got {n_steps}")
     w = tile_world()
     belief = discrete.uniform(w.shape)
     pos = np.array(TILE_START)
     readings = []
-    for name in TILE_PATH[:n_steps]:
+    for t in range(n_steps):
+        if t > 0:                                    # move, then sense: the cycle ends on a reading
+            name = TILE_PATH[t - 1]
+            k = None if motion_noise == 0 else hist.noisy_step_kernel(name, 1.0 - motion_noise, 0.4 * motion_noise,
+                                                                      0.2 * motion_noise)
+            belief = hist.move(belief, name, k, fill=fill)
+            pos = pos + hist.STEPS[name]
         z = str(w[tuple(pos)])
         readings.append(z)
         belief = hist.sense(belief, w, z, p_hit, 1.0 - p_hit)
-        k = None if motion_noise == 0 else hist.noisy_step_kernel(name, 1.0 - motion_noise, 0.4 * motion_noise,
-                                                                  0.2 * motion_noise)
-        belief = hist.move(belief, name, k, fill=fill)
-        pos = pos + hist.STEPS[name]
     return belief, (int(pos[0]), int(pos[1])), readings
 
 
@@ -144,9 +156,9 @@ def tile_world_figure(p_hit: float = 0.85, motion_noise: float = 0.0, n_steps: i
 
     Examples
     --------
-    >>> fig = tile_world_figure(0.85, 0.0, 2)
+    >>> fig = tile_world_figure(0.85, 0.0, 3)
     >>> fig.axes[0].get_title()
-    'after 2 cycles (read blue, green); most likely tile (0, 3)'
+    'after 3 cycles (blue → left → green → up → red); most likely tile (0, 3)'
     """
     import matplotlib.pyplot as plt
 
@@ -154,9 +166,12 @@ def tile_world_figure(p_hit: float = 0.85, motion_noise: float = 0.0, n_steps: i
     fig, ax = plt.subplots(figsize=(5.6, 3.6))
     fig.subplots_adjust(left=0.06, right=0.98, bottom=0.08, top=0.9)
     best = np.unravel_index(int(belief.argmax()), belief.shape)
+    story = [s for k, reading in enumerate(z) for s in ([TILE_PATH[k - 1]] if k else []) + [reading]]
+    said = " → ".join(story if len(story) <= 5 else ["…"] + story[-4:]) if story else "nothing read"
     draw_tiles(tile_world(), belief, ax, truth=truth,
-               title=f"after {n_steps} cycles (read {', '.join(z) if z else 'nothing'}); "
+               title=f"after {n_steps} cycles ({said}); "
                      f"most likely tile ({int(best[0])}, {int(best[1])})")
+    ax.title.set_fontsize(9)
     return fig
 
 
@@ -170,16 +185,10 @@ def hallway_app():
     ['sensor right', 'motion noise', 'cycles', 'cyclic world']
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
-    import matplotlib.pyplot as plt
     from ipywidgets import Checkbox, FloatSlider, IntSlider
 
-    def show(p_hit, motion_noise, n_steps, cyclic):
-        fig = hallway_figure(p_hit, motion_noise, n_steps, cyclic)
-        plt.show()
-        plt.close(fig)
-
     return interactive_app(
-        show,
+        hallway_figure,
         p_hit=FloatSlider(value=0.75, min=0.5, max=1.0, step=0.05, description="sensor right"),
         motion_noise=FloatSlider(value=0.2, min=0.0, max=0.9, step=0.05, description="motion noise"),
         n_steps=IntSlider(value=3, min=1, max=20, description="cycles"),
@@ -194,7 +203,7 @@ class _TileStepper:
         self.n_steps = 0
 
     def step(self, _=None) -> int:
-        self.n_steps = min(self.n_steps + 1, len(TILE_PATH))
+        self.n_steps = min(self.n_steps + 1, len(TILE_PATH) + 1)
         return self.n_steps
 
     def reset(self, _=None) -> int:
@@ -210,26 +219,25 @@ def tile_world_app():
     >>> import contextlib, io
     >>> with contextlib.redirect_stdout(io.StringIO()):   # outside Jupyter the widget prints control codes
     ...     app = tile_world_app()
-    ...     app.children[1].children[0].click()          # "sense + move"
+    ...     app.children[1].children[0].click()          # "next cycle": the first one only senses
     >>> app.stepper.n_steps
     1
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
-    import matplotlib.pyplot as plt
     from ipywidgets import Button, FloatSlider, HBox, Output, VBox
 
     state = _TileStepper()
     p_hit = FloatSlider(value=0.85, min=0.5, max=1.0, step=0.05, description="sensor right")
     noise = FloatSlider(value=0.0, min=0.0, max=0.8, step=0.1, description="motion noise")
-    step_b, reset_b = Button(description="sense + move"), Button(description="reset")
+    step_b = Button(description="next cycle", tooltip="move one tile along the path, then sense (the first cycle only "
+                                                       "senses): the belief after each reading, as in the worked example")
+    reset_b = Button(description="reset")
     out = Output()
 
     def redraw(*_):
         with out:
             out.clear_output(wait=True)
-            fig = tile_world_figure(p_hit.value, noise.value, state.n_steps)
-            plt.show()
-            plt.close(fig)
+            show_figure(tile_world_figure(p_hit.value, noise.value, state.n_steps))
 
     step_b.on_click(lambda b: (state.step(), redraw()))
     reset_b.on_click(lambda b: (state.reset(), redraw()))

@@ -11,7 +11,7 @@ import numpy as np
 from ..geometry import transform_points
 from ..grid import OccupancyGrid
 from ..plot import draw_map, draw_robot
-from . import with_hint
+from . import interactive_app
 
 __all__ = ["robot_on_map_figure", "robot_on_map", "DEMOS"]
 
@@ -51,22 +51,20 @@ def robot_on_map_figure(grid: OccupancyGrid, x: float, y: float, theta_deg: floa
 
 def robot_on_map(grid: OccupancyGrid, x: float = 10.0, y: float = 5.5, theta_deg: float = 0.0):
     """Sliders for x, y and heading that redraw :func:`robot_on_map_figure`. Returns the widget."""
-    import matplotlib.pyplot as plt
-    from ipywidgets import FloatSlider, interactive
+    from ipywidgets import FloatSlider
 
     xmin, xmax, ymin, ymax = grid.extent
     res = grid.resolution
 
-    def show(x, y, heading):
-        robot_on_map_figure(grid, x, y, heading)
-        plt.show()
+    def figure(x, y, heading):
+        return robot_on_map_figure(grid, x, y, heading)
 
-    return with_hint(interactive(
-        show,
+    return interactive_app(
+        figure,
         x=FloatSlider(value=x, min=xmin, max=xmax - res, step=res, description="x [m]"),
         y=FloatSlider(value=y, min=ymin, max=ymax - res, step=res, description="y [m]"),
         heading=FloatSlider(value=theta_deg, min=-180.0, max=179.0, step=1.0, description="heading [°]"),
-    ))
+    )
 
 
 def _demo():

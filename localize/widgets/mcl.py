@@ -22,7 +22,7 @@ from ..metrics import heading_error, position_error
 from ..plot import draw_map, draw_robot
 from ..plot.mcl import draw_particles
 from ..runloop import run_mcl
-from . import quiet_outside_ipython, with_hint
+from . import figure_output, with_hint
 
 __all__ = ["simulate", "mcl_run_figure", "mcl_widget_figure", "mcl_player", "DEMOS", "DEMO_VARIANTS"]
 
@@ -189,7 +189,6 @@ def mcl_player(n_steps: int = 40, **defaults: Any):
     >>> plt.close("all")
     """
     import ipywidgets as W
-    import matplotlib.pyplot as plt
 
     cache: dict = {}
     p = dict(n_particles=5000, resampler="systematic", threshold=0.5, alpha_scale=1.0, sigma_hit=0.2)
@@ -205,13 +204,11 @@ def mcl_player(n_steps: int = 40, **defaults: Any):
     W.jslink((play, "value"), (step, "value"))
 
     def show(step, n_particles, resampler, threshold, alpha_scale, sigma_hit):
-        mcl_widget_figure(step, cache=cache, n_particles=n_particles, resampler=resampler, threshold=threshold,
-                          alpha_scale=alpha_scale, sigma_hit=sigma_hit, n_steps=n_steps)
-        plt.show()
+        return mcl_widget_figure(step, cache=cache, n_particles=n_particles, resampler=resampler,
+                                 threshold=threshold, alpha_scale=alpha_scale, sigma_hit=sigma_hit, n_steps=n_steps)
 
-    with quiet_outside_ipython():
-        out = W.interactive_output(show, dict(step=step, n_particles=n_particles, resampler=resampler,
-                                              threshold=threshold, alpha_scale=alpha_scale, sigma_hit=sigma_hit))
+    out = figure_output(show, dict(step=step, n_particles=n_particles, resampler=resampler, threshold=threshold,
+                                   alpha_scale=alpha_scale, sigma_hit=sigma_hit))
     controls = W.VBox([W.HBox([play, step]), W.HBox([n_particles, resampler]),
                        W.HBox([threshold, alpha_scale, sigma_hit])])
     return with_hint(W.VBox([controls, out]))

@@ -11,6 +11,7 @@ from __future__ import annotations
 from functools import partial
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..motion import (
     move_velocity,
@@ -18,6 +19,7 @@ from ..motion import (
     sample_odometry,
     sample_velocity,
     velocity_pdf,
+    velocity_variances,
 )
 from . import with_hint
 
@@ -31,6 +33,7 @@ __all__ = [
     "odometry_cloud_figure",
     "odometry_widget",
     "velocity_cloud_figure",
+    "velocity_position_density",
     "velocity_widget",
 ]
 
@@ -265,35 +268,46 @@ def odometry_widget(n: int = 500, **kwargs):
 class VelocityCloudView:
     """Like :class:`OdometryCloudView`, for the velocity model (alpha1..alpha6, v, omega).
 
-    The left panel is the density over ``(x, y, theta)`` summed over
-    ``n_theta`` headings: the position density.
+    The left panel is the position density ``p(x, y | v, omega)``: the
+    density of :func:`localize.motion.velocity_pdf` integrated over the final
+    heading, in closed form (:func:`velocity_position_density`), averaged
+    over ``supersample**2`` points of each pixel, its colour proportional to
+    the square root of the density. The right panel shows the
+    samples and, for every tenth one, its final heading as a short line:
+    ``alpha5`` and ``alpha6`` (the extra final rotation) turn only these
+    headings, never the positions or the density.
 
     Examples
     --------
-    >>> view = VelocityCloudView(n=50, resolution=20, n_theta=8)
+    >>> view = VelocityCloudView(n=50, resolution=20)
     >>> fig = view.update(*[0.01] * 6, v=1.0, omega=0.5)
     >>> view.scatter.get_offsets().shape
     (50, 2)
     """
 
-    def __init__(self, n: int = 500, seed: int = 0, dt: float = 1.0, resolution: int = 60, n_theta: int = 16,
+    def __init__(self, n: int = 500, seed: int = 0, dt: float = 1.0, resolution: int = 90, supersample: int = 2,
                  extent=(-1.0, 1.8, -1.2, 1.6), min_std: float = 1e-3):
         self.n, self.seed, self.dt, self.extent, self.min_std = int(n), int(seed), float(dt), tuple(extent), min_std
-        xy = _grid(self.extent, resolution)
-        self.n_theta = int(n_theta)
-        ths = -np.pi + (np.arange(self.n_theta) + 0.5) * 2 * np.pi / self.n_theta
-        self._grid = np.concatenate([np.broadcast_to(xy[:, :, None, :], xy.shape[:2] + (self.n_theta, 2)),
-                                     np.broadcast_to(ths[None, None, :, None], xy.shape[:2] + (self.n_theta, 1))],
-                                    axis=-1)
+        self.resolution, self.supersample = int(resolution), int(supersample)
+        self._grid = _grid(self.extent, self.resolution * self.supersample)
         self.fig, self.axes = _two_panels()
+        from matplotlib.collections import LineCollection
+        from matplotlib.colors import PowerNorm
+
+        # colour ~ sqrt(density): the density diverges like 1/distance at the start pose, which at v = 0 is
+        # inside the cloud; on a linear scale the rest of that cloud would be a few dim pixels
         self.image = self.axes[0].imshow(np.zeros((resolution, resolution)), origin="lower", extent=self.extent,
-                                         cmap="viridis", interpolation="nearest")
+                                         cmap="viridis", interpolation="nearest", norm=PowerNorm(0.5))
         self.scatter = self.axes[1].scatter(np.zeros(self.n), np.zeros(self.n), s=3, color="tab:red", alpha=0.5,
                                             linewidths=0)
+
+        self.headings = LineCollection([], colors="tab:blue", linewidths=0.6, alpha=0.8)
+        self.axes[1].add_collection(self.headings)
         self.arcs = [ax.plot([], [], ls="--", color=c, lw=1)[0] for ax, c in zip(self.axes, ("w", "k"))]
-        _finish(self.fig, self.axes, self.extent, "density p(x, y | v, omega)", f"{self.n} samples")
+        _finish(self.fig, self.axes, self.extent, "density p(x, y | v, omega), colour ~ its square root",
+                f"{self.n} samples, final heading of every 10th (blue)")
         self._blit = _Blitter(self.fig, [(self.axes[0], [self.image, self.arcs[0]]),
-                                         (self.axes[1], [self.scatter, self.arcs[1]])])
+                                         (self.axes[1], [self.scatter, self.headings, self.arcs[1]])])
 
     def update(self, alpha1: float, alpha2: float, alpha3: float, alpha4: float, alpha5: float, alpha6: float,
                v: float = 1.0, omega: float = 0.8, seed: int | None = None):
@@ -301,11 +315,15 @@ class VelocityCloudView:
         alphas = [alpha1, alpha2, alpha3, alpha4, alpha5, alpha6]
         rng = np.random.default_rng(self.seed if seed is None else seed)
         cloud = sample_velocity(np.zeros((self.n, 3)), (v, omega), self.dt, alphas, rng, min_std=self.min_std)
-        P = velocity_pdf(self._grid, (v, omega), [0.0, 0.0, 0.0], self.dt, alphas,
-                         min_std=self.min_std).sum(axis=-1) * (2 * np.pi / self.n_theta)
+        fine = velocity_position_density(self._grid, (v, omega), self.dt, alphas, min_std=self.min_std)
+        r, s = self.resolution, self.supersample
+        P = fine.reshape(r, s, r, s).mean(axis=(1, 3))          # the pixel's mean density
         self.image.set_data(P)
         self.image.set_clim(0.0, max(float(P.max()), 1e-12))
         self.scatter.set_offsets(cloud[:, :2])
+        some = cloud[::10]
+        tips = some[:, :2] + 0.08 * np.stack([np.cos(some[:, 2]), np.sin(some[:, 2])], axis=-1)
+        self.headings.set_segments(np.stack([some[:, :2], tips], axis=1))
         t = np.linspace(0.0, self.dt, 40)
         arc = move_velocity(np.zeros((40, 3)), v * t, omega * t, 1.0)     # the noise-free arc
         for line in self.arcs:
@@ -317,17 +335,54 @@ class VelocityCloudView:
         return self._blit.png()
 
 
+def velocity_position_density(xy: ArrayLike, u: ArrayLike, dt: float, alphas: ArrayLike,
+                              min_std: float = 0.0) -> np.ndarray:
+    """The velocity model's density of the new *position* ``p(x, y | v, omega)``, from the pose ``(0, 0, 0)``.
+
+    :func:`localize.motion.velocity_pdf` integrated over the final heading.
+    The heading enters that density only through the final-rotation noise
+    ``gamma`` (a wrapped normal in the heading); the integral of a density
+    over its whole circle is 1, so the position density is the same formula
+    with ``gamma`` uniform over the circle, times ``2*pi``. Computed that way
+    (``gamma``'s standard deviation set to a full turn, whose wrapped normal
+    is uniform to 1e-8), it does not depend on ``alpha5`` and ``alpha6`` and
+    stays smooth when they are 0, where summing ``velocity_pdf`` over a few
+    headings saw a needle in the heading and left isolated pixels.
+
+    Examples
+    --------
+    >>> a = [0.01] * 6
+    >>> p = velocity_position_density([[1.0, 0.0], [1.0, 0.3]], (1.0, 0.0), 1.0, a)
+    >>> p.round(3)
+    array([31.831,  0.   ])
+    >>> bool(np.allclose(p, velocity_position_density([[1.0, 0.0], [1.0, 0.3]], (1.0, 0.0), 1.0, a[:4] + [0, 0],
+    ...                                                min_std=1e-3)))
+    True
+    """
+    xy = np.asarray(xy, dtype=float)
+    if xy.shape[-1:] != (2,):
+        raise ValueError(f"xy must have shape (..., 2) (x, y in metres); got shape {xy.shape}")
+    full_turn = (2.0 * np.pi / float(dt)) ** 2
+
+    def uniform_heading(v, w, a):
+        var_v, var_w, _ = velocity_variances(v, w, a)
+        return var_v, var_w, np.full(np.shape(var_v), full_turn)
+
+    poses = np.concatenate([xy, np.zeros(xy.shape[:-1] + (1,))], axis=-1)
+    return 2.0 * np.pi * velocity_pdf(poses, u, [0.0, 0.0, 0.0], dt, alphas, noise=uniform_heading, min_std=min_std)
+
+
 def velocity_cloud_figure(alpha1: float = 0.01, alpha2: float = 0.01, alpha3: float = 0.01,
                           alpha4: float = 0.01, alpha5: float = 0.01, alpha6: float = 0.01,
                           v: float = 1.0, omega: float = 0.8, n: int = 500, seed: int = 0, **kwargs):
     """Callback: velocity-model samples (right) next to the position density (left).
 
     Parameters as in :func:`localize.motion.sample_velocity`; ``kwargs`` go to
-    :class:`VelocityCloudView` (``dt``, ``resolution``, ``n_theta``, ``extent``).
+    :class:`VelocityCloudView` (``dt``, ``resolution``, ``supersample``, ``extent``).
 
     Examples
     --------
-    >>> fig = velocity_cloud_figure(n=50, resolution=20, n_theta=8)
+    >>> fig = velocity_cloud_figure(n=50, resolution=20)
     >>> len(fig.axes)
     2
     """
@@ -340,7 +395,7 @@ def velocity_widget(n: int = 500, **kwargs):
 
     Examples
     --------
-    >>> box = velocity_widget(n=50, resolution=20, n_theta=8)
+    >>> box = velocity_widget(n=50, resolution=20)
     >>> sorted(box.sliders)[:3], "omega" in box.sliders
     (['alpha1', 'alpha2', 'alpha3'], True)
     """

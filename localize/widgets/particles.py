@@ -12,7 +12,7 @@ import numpy as np
 
 from ..resample import RESAMPLERS, SIRResult, bootstrap_filter
 from ..sim import CorridorRun, corridor_run
-from . import with_hint
+from . import interactive_app
 
 __all__ = ["sir_corridor", "sir_figure", "sir_app", "DEMOS", "DEMO_VARIANTS"]
 
@@ -93,14 +93,10 @@ def sir_figure(n_particles: int = 300, resampler: str = "systematic", threshold:
 
 def sir_app():
     """Sliders (particles, resampler, threshold, motion noise, steps, seed) redrawing :func:`sir_figure`."""
-    from IPython.display import display
-    from ipywidgets import Dropdown, FloatSlider, IntSlider, interactive
+    from ipywidgets import Dropdown, FloatSlider, IntSlider
 
-    def show(n_particles, resampler, threshold, n_steps, sigma_move, seed):
-        display(sir_figure(n_particles, resampler, threshold, n_steps, sigma_move, seed))
-
-    return with_hint(interactive(
-        show,
+    return interactive_app(
+        sir_figure,
         n_particles=IntSlider(value=300, min=10, max=3000, step=10, description="particles",
                               continuous_update=False),
         resampler=Dropdown(options=list(RESAMPLERS), value="systematic", description="resampler"),
@@ -110,7 +106,7 @@ def sir_app():
         sigma_move=FloatSlider(value=0.2, min=0.0, max=1.0, step=0.05, description="motion noise",
                                continuous_update=False),
         seed=IntSlider(value=0, min=0, max=30, description="seed", continuous_update=False),
-    ))
+    )
 
 
 DEMOS = {"sir": lambda: sir_figure()}

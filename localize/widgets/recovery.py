@@ -21,7 +21,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from . import quiet_outside_ipython, slider, with_hint
+from . import figure_output, slider, with_hint
 
 __all__ = ["kidnap_trial", "kidnap_summary", "kidnap_figure", "kidnap_widget", "DEMOS", "DEMO_VARIANTS"]
 
@@ -178,7 +178,6 @@ def kidnap_widget(**defaults):
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
     import ipywidgets as W
-    from IPython.display import display
 
     p = dict(alpha_slow=0.1, alpha_fast=0.5, temperature=1.0, injection=0.0, augmented=True, n_particles=1000,
              seed=2)
@@ -199,11 +198,10 @@ def kidnap_widget(**defaults):
             fig = kidnap_figure(**v)
         except ValueError as err:                  # e.g. alpha_slow >= alpha_fast: say so instead of a traceback
             print("not a valid setting:", err)
-            return
-        display(fig)
+            return None
+        return fig
 
-    with quiet_outside_ipython():
-        out = W.interactive_output(show, controls)
+    out = figure_output(show, controls)
     c = controls
     return with_hint(W.VBox([c["augmented"], c["alpha_slow"], c["alpha_fast"],
                              W.HBox([c["temperature"], c["injection"]]), W.HBox([c["n_particles"], c["seed"]]), out]))
