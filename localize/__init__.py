@@ -44,7 +44,12 @@ module                           what it holds
 :mod:`localize.beam_learning`    fitting the beam model's parameters (chapter 5)
 :mod:`localize.resample`         resamplers and the effective sample size (chapter 6)
 :mod:`localize.diagnostics`      exact posteriors and distances to judge a particle filter (chapters 6, 8)
-:mod:`localize.mcl`              MCL, augmented MCL, ``run_filter`` over a log (chapters 7, 8)
+:mod:`localize.mcl`              the particle filter: MCL, augmented MCL (chapters 7, 8)
+:mod:`localize.estimate`         one answer from a cloud: ``estimate_pose``, clusters, covariance (chapter 7)
+:mod:`localize.runloop`          the run loop of PR table 8.2, ``run_filter``, its record (chapters 7, 8)
+:mod:`localize.policies`         the loop's rules as objects: gating, beam masks, recovery, state (chapters 8, 9)
+:mod:`localize.evidence`         what the map says about an estimate: scan fit, probes (chapters 8, 9)
+:mod:`localize.reliability`      "am I localized?" as a calibrated probability (chapter 8)
 :mod:`localize.kld`              KLD-sampling (chapter 8)
 :mod:`localize.sim`              simulated robots: odometry, scans, sightings, kidnapping (chapters 3-10)
 :mod:`localize.metrics`          errors, RMSE, NEES, convergence, success rates (chapters 7-10)
@@ -52,12 +57,15 @@ module                           what it holds
 :mod:`localize.mapping`          occupancy grid mapping with known poses (chapter 9)
 :mod:`localize.scanmatch`        does the odometry agree with the scans? (chapter 9)
 :mod:`localize.smooth`           forwards and backwards over a recorded log (chapter 9)
+:mod:`localize.settings`         the settings of a run over a log, each once (chapter 9)
+:mod:`localize.pipeline`         a log in, a trajectory out: read, map, filter, collect (chapter 9)
 :mod:`localize.cli`              ``python -m localize``: the command line (chapter 9)
 :mod:`localize.ekf`              EKF and UKF landmark localization (chapter 10)
 :mod:`localize.compare`          the EKF-versus-MCL experiments (chapter 10)
 :mod:`localize.plot`             figures, one module per topic
 :mod:`localize.widgets`          the interactive figures of the chapters
 :mod:`localize.check`            self-checks for the exercises and the homework
+:mod:`localize.grade`            grading a class's homework (chapter 12)
 ===============================  ==========================================================================
 
 Every submodule is in that list:
@@ -92,7 +100,8 @@ _LAZY_NAMES = {
 _SUBMODULES = (
     "beam_learning", "check", "cli", "compare", "diagnostics", "discrete", "ekf", "estimate", "evidence",
     "geometry", "grid", "gridloc", "histogram", "io", "kld", "mapping", "maps", "mcl", "metrics", "motion",
-    "multiscale", "pipeline", "plot", "policies", "raycast", "resample", "runloop", "scanmatch", "sensors",
+    "multiscale", "pipeline", "plot", "policies", "raycast", "reliability", "resample", "runloop", "scanmatch",
+    "sensors",
     "settings", "sim", "smooth", "widgets",
 )
 
