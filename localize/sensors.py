@@ -727,12 +727,12 @@ class LikelihoodField:
             if known.any() and not known.all():
                 self.unknown_log_prob = float(np.log(np.mean(np.exp(cells[known]))))
                 cells = np.where(known, cells, self.unknown_log_prob)
-        table = np.full((rows + 2 * pad, cols + 2 * pad), outside)
+        # float32 from the start (the same rounding as a float64 table cast afterwards, without that table)
+        table = np.full((rows + 2 * pad, cols + 2 * pad), outside, dtype=np.float32)
         table[pad:pad + rows, pad:pad + cols] = cells
         self._pad = pad
-        self._table = table.astype(np.float32)
+        self._table = table
         self._flat = self._table.ravel()
-        self._flat64 = self._flat.astype(np.float64)   # the same values, gathered straight into the float64 sums
         self._wp = cols + 2 * pad
 
     @property
@@ -835,13 +835,13 @@ class LikelihoodField:
         # beams x poses layout: each beam's offsets are one scalar against a row of poses
         bx, by = bx[:, None], by[:, None]
         c, s, x0, y0 = (v[:, 0] for v in (c, s, x0, y0))
-        ex, ey, t, j, i, ii, vals, r = self._work(nb, b)
+        ex, ey, t, j, i, ii, v32, vals, r = self._work(nb, b)
         exact_sum = _rowsum_is_numpys(b)
         widen = ii is not i
         for k in range(0, n, nb):
             m = min(nb, n - k)
             if m < nb:
-                ex, ey, t, j, i, ii, vals, r = (w[..., :m] for w in (ex, ey, t, j, i, ii, vals, r))
+                ex, ey, t, j, i, ii, v32, vals, r = (w[..., :m] for w in (ex, ey, t, j, i, ii, v32, vals, r))
             ck, sk = c[k:k + m], s[k:k + m]
             np.multiply(bx, ck, out=ex)
             np.multiply(by, sk, out=t)
@@ -860,7 +860,8 @@ class LikelihoodField:
             i += j
             if widen:
                 np.copyto(ii, i)
-            self._flat64.take(ii, out=vals, mode="clip")   # every index is inside the table: "clip" never clips
+            self._flat.take(ii, out=v32, mode="clip")   # every index is inside the table: "clip" never clips
+            np.copyto(vals, v32)
             if floor is not None:
                 np.maximum(vals, floor, out=vals)
             if exact_sum:       # the sum over beams in numpy's own order: the same bits as vals.T.sum(axis=1)
@@ -875,10 +876,10 @@ class LikelihoodField:
         if getattr(self, "_work_key", None) != key:
             f32, ip = np.float32, np.intp
             small = np.int32 if self._flat.size < 2 ** 31 else ip   # cell indices, exact in 32 bits
-            ex, ey, t = (np.empty(key, dtype=f32) for _ in range(3))
+            ex, ey, t, v32 = (np.empty(key, dtype=f32) for _ in range(4))
             j, i = np.empty(key, dtype=small), np.empty(key, dtype=small)
             ii = i if small is ip else np.empty(key, dtype=ip)
-            self._work_arrays = (ex, ey, t, j, i, ii, np.empty(key), np.empty((8, poses)))
+            self._work_arrays = (ex, ey, t, j, i, ii, v32, np.empty(key), np.empty((8, poses)))
             self._work_key = key
         return self._work_arrays
 
