@@ -79,12 +79,16 @@ def main(argv: list[str] | None = None) -> None:
                 peaks[name, n] = max(peaks[name, n], mb)
             loads.append(os.getloadavg()[0])
         print(f"round {r + 1}/{args.rounds} done, load {loads[-1]:.1f}", file=sys.stderr)
+    report(times, peaks, list(progs), args.ns, args.rounds, loads, bool(args.before))
+
+def report(times: dict, peaks: dict, names: list[str], ns: list[int], rounds: int, loads: list[float],
+           before: bool) -> None:
+    """Print the two Markdown tables: times with ratios, then peak memory."""
     med = {k: statistics.median(v) for k, v in times.items()}
-    names = list(progs)
     cols = [f"{p} [ms]" for p in names] + ["localize / Beluga -O3"]
-    if args.before:
+    if before:
         cols.append("localize / before")
-    print(f"One MCL cycle (median of 10 cycles a run, median of {args.rounds} interleaved rounds), one core; "
+    print(f"One MCL cycle (median of 10 cycles a run, median of {rounds} interleaved rounds), one core; "
           f"1-minute load average {min(loads):.1f}-{max(loads):.1f} on {os.cpu_count()} cores\n")
     print("| N | " + " | ".join(cols) + " |")
     print("|---:|" + "---:|" * len(cols))
@@ -93,15 +97,15 @@ def main(argv: list[str] | None = None) -> None:
         r = sorted(x / y for x, y in zip(times[a, n], times[b, n]))
         return f"{statistics.median(r):.2f}x ({r[0]:.2f}-{r[-1]:.2f})"
 
-    for n in args.ns:
+    for n in ns:
         row = [f"{med[p, n]:.1f}" for p in names] + [ratio("localize", "Beluga -O3", n)]
-        if args.before:
+        if before:
             row.append(ratio("localize", "localize before", n))
         print(f"| {n:,} | " + " | ".join(row) + " |")
     print("\nPeak resident memory [MB] (largest over the rounds)\n")
     print("| N | " + " | ".join(names) + " |")
     print("|---:|" + "---:|" * len(names))
-    for n in args.ns:
+    for n in ns:
         print(f"| {n:,} | " + " | ".join(f"{peaks[p, n]:.0f}" for p in names) + " |")
 
 
