@@ -878,6 +878,13 @@ class LikelihoodField:
                 ll[k:k + m] = np.ascontiguousarray(vals.T, dtype=f32).sum(axis=1, dtype=np.float64)
         return ll * self.temper if self.temper != 1.0 else ll
 
+    def __getstate__(self) -> dict:
+        """Pickle without the work arrays of :meth:`log_likelihood` (rebuilt on the next call)."""
+        state = self.__dict__.copy()
+        state.pop("_work_arrays", None)
+        state.pop("_work_key", None)
+        return state
+
     def _work(self, poses: int, beams: int) -> tuple[NDArray, ...]:
         """Work arrays for blocks of ``beams`` x ``poses`` end points, kept between calls (a few MB)."""
         key = (beams, poses)

@@ -10,6 +10,7 @@ readable per-beam oracle ``log_likelihood_reference`` within the tolerance the f
 from __future__ import annotations
 
 import math
+import pickle
 
 import numpy as np
 import pytest
@@ -166,3 +167,15 @@ def test_rows_longer_than_numpys_buffer_take_the_transposed_sum(grid, monkeypatc
     z, a = rng.uniform(0.1, MAXR, 9000), rng.uniform(-np.pi, np.pi, 9000)
     monkeypatch.setattr(sensors, "_ROWSUM_OK", {9000: False})
     np.testing.assert_array_equal(lf.log_likelihood(poses, z, a), vectorised_reference(lf, poses, z, a))
+
+
+def test_a_pickled_model_leaves_its_work_arrays_behind_and_scores_alike(grid):
+    lf = LikelihoodField(grid, MAXR, z_short=0.1)
+    rng = np.random.default_rng(9)
+    poses, (z, a) = cloud(grid, 300, rng), scan(rng, 50)
+    before = lf.log_likelihood(poses, z, a)
+    blob = pickle.dumps(lf)
+    assert "_work_arrays" in lf.__dict__
+    again = pickle.loads(blob)
+    assert "_work_arrays" not in again.__dict__
+    np.testing.assert_array_equal(again.log_likelihood(poses, z, a), before)
