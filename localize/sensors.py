@@ -95,6 +95,9 @@ _ETA_SIGMAS = 8
 _Z_FLOOR = 1e-3
 #: Probabilities handed to the inverse normal CDF are clipped into [_TINY_P, _BELOW_ONE], where it is finite.
 _TINY_P, _BELOW_ONE = 1e-300, 1 - 1e-16
+#: LikelihoodField.log_likelihood works on blocks of about this many end points (poses x beams), so that its
+#: work arrays (40 bytes an end point, 2.6 MB) stay near the core instead of N x B temporaries.
+_LF_BLOCK = 1 << 16
 
 
 # ------------------------------------------------------------------ helpers
@@ -265,6 +268,9 @@ class BeamModel:
         Ray casting method and lookup-table bins (see
         :class:`localize.raycast.RayCaster`; ``None``: its default for the
         method, 360 for ``"lut"``, what fits the memory budget for ``"compact"``).
+        Default ``"compact"``: the 8-bit table under 90 MB that the command
+        line uses (``"lut"`` takes ``2 * H * W * 360`` bytes, 460 MB for an
+        800 x 800 map).
     caster : RayCaster, optional
         Share a caster (and its table) between models.
 
@@ -278,7 +284,7 @@ class BeamModel:
     def __init__(self, grid: OccupancyGrid | None, max_range: float, z_hit: float = 0.8, z_short: float = 0.1,
                  z_max: float = 0.05, z_rand: float = 0.05, sigma_hit: float = 0.2, lambda_short: float = 0.5,
                  *, sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
-                 temper: float = 1.0, method: str = "lut", n_bins: int | None = None,
+                 temper: float = 1.0, method: str = "compact", n_bins: int | None = None,
                  caster: RayCaster | None = None) -> None:
         self.grid = None if grid is None else check_grid(grid)
         self.max_range = check_max_range(max_range)
@@ -533,6 +539,63 @@ class BeamModel:
         return self.sample_expected(self.expected(poses, angles), rng)
 
 
+def _rowsum(a: NDArray[np.float64], out: NDArray[np.float64], r: NDArray[np.float64]) -> None:
+    """``out[j] = sum_k a[k, j]`` added in the order of numpy's pairwise summation of a contiguous row.
+
+    ``a.T.copy().sum(axis=1)`` gives the same bits, but needs the transposed copy: numpy adds a row of
+    ``n <= 128`` numbers into 8 running sums (element ``k`` into sum ``k % 8``), joins them as
+    ``((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7))`` and adds the ``n % 8`` left over one by one; a
+    longer row is split in two at a multiple of 8 near its middle. Here each of those steps is one
+    vectorised add over all the columns. ``r`` is ``(8, m)`` scratch. :func:`_rowsum_is_numpys` checks
+    the claim against this numpy once per row length.
+    """
+    n = a.shape[0]
+    if n < 8:
+        out[...] = 0.0
+        for k in range(n):
+            out += a[k]
+        return
+    if n > 128:
+        n2 = n // 2
+        n2 -= n2 % 8
+        right = np.empty_like(out)
+        _rowsum(a[:n2], out, r)
+        _rowsum(a[n2:], right, r)
+        out += right
+        return
+    top = n - n % 8
+    np.copyto(r, a[:8])
+    for k in range(8, top, 8):
+        r += a[k:k + 8]
+    r[0] += r[1]
+    r[2] += r[3]
+    r[4] += r[5]
+    r[6] += r[7]
+    r[0] += r[2]
+    r[4] += r[6]
+    np.add(r[0], r[4], out=out)
+    for k in range(top, n):
+        out += a[k]
+
+
+_ROWSUM_OK: dict[int, bool] = {}
+
+
+def _rowsum_is_numpys(n: int) -> bool:
+    """Whether :func:`_rowsum` gives numpy's own bits for rows of ``n`` float32 numbers summed in float64.
+
+    Checked once per ``n`` on random numbers of mixed magnitudes (a different numpy, or a row longer than
+    its 8192-element buffer, may add in another order: the caller then transposes and calls numpy).
+    """
+    if n not in _ROWSUM_OK:
+        rng = np.random.default_rng(n)
+        v = (rng.normal(size=(n, 64)) * 10.0 ** rng.integers(-4, 5, size=(n, 64))).astype(np.float32)
+        got = np.empty(64)
+        _rowsum(v.astype(np.float64), got, np.empty((8, 64)))
+        _ROWSUM_OK[n] = bool(np.array_equal(got, np.ascontiguousarray(v.T).sum(axis=1, dtype=np.float64)))
+    return _ROWSUM_OK[n]
+
+
 # -------------------------------------------------------- likelihood field
 class LikelihoodField:
     """The likelihood-field (end-point) model, PR table 6.3 (ROS AMCL's default).
@@ -700,10 +763,11 @@ class LikelihoodField:
             if known.any() and not known.all():
                 self.unknown_log_prob = float(np.log(np.mean(np.exp(cells[known]))))
                 cells = np.where(known, cells, self.unknown_log_prob)
-        table = np.full((rows + 2 * pad, cols + 2 * pad), outside)
+        # float32 from the start (the same rounding as a float64 table cast afterwards, without that table)
+        table = np.full((rows + 2 * pad, cols + 2 * pad), outside, dtype=np.float32)
         table[pad:pad + rows, pad:pad + cols] = cells
         self._pad = pad
-        self._table = table.astype(np.float32)
+        self._table = table
         self._flat = self._table.ravel()
         self._wp = cols + 2 * pad
 
@@ -772,6 +836,11 @@ class LikelihoodField:
         table's border cells, which hold that score. With ``z_short > 0`` no
         beam scores below :meth:`short_floor` of its range.
 
+        Poses are scored in blocks of about 65,536 end points with work arrays
+        kept on the model (no N x B temporaries), giving the same bits as the
+        whole-cloud formula: float32 end points, float64 sum of each pose's
+        beams in numpy's summation order. Not thread-safe on one model.
+
         Examples
         --------
         >>> from localize.maps import office
@@ -783,40 +852,84 @@ class LikelihoodField:
         z, a = self._prepare(ranges, angles)
         sp = sensor_poses(poses, self.sensor_offset)
         n = sp.shape[0]
-        if z.size == 0:
-            return np.zeros(n)
+        ll = np.zeros(n)
+        if z.size == 0 or n == 0:
+            return ll
         g = self.grid
         inv = 1.0 / g.resolution
         f32 = np.float32
-        # end point in (padded) cell units: p + R(theta) (z cos a, z sin a)
+        # end point in (padded) cell units: p + R(theta) (z cos a, z sin a), every step rounded to float32
         bx = (z * np.cos(a) * inv).astype(f32)
         by = (z * np.sin(a) * inv).astype(f32)
         c = np.cos(sp[:, 2]).astype(f32)[:, None]
         s = np.sin(sp[:, 2]).astype(f32)[:, None]
         x0 = ((sp[:, 0] - g.origin[0]) * inv + self._pad).astype(f32)[:, None]
         y0 = ((sp[:, 1] - g.origin[1]) * inv + self._pad).astype(f32)[:, None]
-        ex = c * bx
-        ex -= s * by
-        ex += x0
-        ey = s * bx
-        ey += c * by
-        ey += y0
         rows_p, cols_p = self._table.shape
-        lo_x, lo_y = float(x0.min()) if n else 0.0, float(y0.min()) if n else 0.0
-        hi_x, hi_y = float(x0.max()) if n else 0.0, float(y0.max()) if n else 0.0
         reach = self.max_range * inv + 1
-        if lo_x - reach < 0 or lo_y - reach < 0 or hi_x + reach >= cols_p or hi_y + reach >= rows_p:
-            np.clip(ex, 0, cols_p - 1, out=ex)
-            np.clip(ey, 0, rows_p - 1, out=ey)
-        j = ex.astype(np.int32)
-        i = ey.astype(np.int32)
-        i *= self._wp
-        i += j
-        vals = self._flat.take(i)
-        if self.z_short > 0:
-            np.maximum(vals, self.short_floor(z).astype(f32)[None, :], out=vals)
-        ll = vals.sum(axis=1, dtype=np.float64)
+        # poses far off the map: clip end points onto the padded table's border (which holds the off-map score)
+        clip = (float(x0.min()) - reach < 0 or float(y0.min()) - reach < 0
+                or float(x0.max()) + reach >= cols_p or float(y0.max()) + reach >= rows_p)
+        floor = self.short_floor(z).astype(f32).astype(np.float64)[:, None] if self.z_short > 0 else None
+        b = z.size
+        nb = max(1, min(n, _LF_BLOCK // b))
+        # beams x poses layout: each beam's offsets are one scalar against a row of poses
+        bx, by = bx[:, None], by[:, None]
+        c, s, x0, y0 = (v[:, 0] for v in (c, s, x0, y0))
+        ex, ey, t, j, i, ii, v32, vals, r = self._work(nb, b)
+        exact_sum = _rowsum_is_numpys(b)
+        widen = ii is not i
+        for k in range(0, n, nb):
+            m = min(nb, n - k)
+            if m < nb:
+                ex, ey, t, j, i, ii, v32, vals, r = (w[..., :m] for w in (ex, ey, t, j, i, ii, v32, vals, r))
+            ck, sk = c[k:k + m], s[k:k + m]
+            np.multiply(bx, ck, out=ex)
+            np.multiply(by, sk, out=t)
+            ex -= t
+            ex += x0[k:k + m]
+            np.multiply(bx, sk, out=ey)
+            np.multiply(by, ck, out=t)
+            ey += t
+            ey += y0[k:k + m]
+            if clip:
+                np.clip(ex, 0, cols_p - 1, out=ex)
+                np.clip(ey, 0, rows_p - 1, out=ey)
+            np.copyto(j, ex, casting="unsafe")       # truncation, as astype: every coordinate is >= 0 here
+            np.copyto(i, ey, casting="unsafe")
+            i *= self._wp
+            i += j
+            if widen:
+                np.copyto(ii, i)
+            self._flat.take(ii, out=v32, mode="clip")   # every index is inside the table: "clip" never clips
+            np.copyto(vals, v32)
+            if floor is not None:
+                np.maximum(vals, floor, out=vals)
+            if exact_sum:       # the sum over beams in numpy's own order: the same bits as vals.T.sum(axis=1)
+                _rowsum(vals, ll[k:k + m], r)
+            else:
+                ll[k:k + m] = np.ascontiguousarray(vals.T, dtype=f32).sum(axis=1, dtype=np.float64)
         return ll * self.temper if self.temper != 1.0 else ll
+
+    def __getstate__(self) -> dict:
+        """Pickle without the work arrays of :meth:`log_likelihood` (rebuilt on the next call)."""
+        state = self.__dict__.copy()
+        state.pop("_work_arrays", None)
+        state.pop("_work_key", None)
+        return state
+
+    def _work(self, poses: int, beams: int) -> tuple[NDArray, ...]:
+        """Work arrays for blocks of ``beams`` x ``poses`` end points, kept between calls (a few MB)."""
+        key = (beams, poses)
+        if getattr(self, "_work_key", None) != key:
+            f32, ip = np.float32, np.intp
+            small = np.int32 if self._flat.size < 2 ** 31 else ip   # cell indices, exact in 32 bits
+            ex, ey, t, v32 = (np.empty(key, dtype=f32) for _ in range(4))
+            j, i = np.empty(key, dtype=small), np.empty(key, dtype=small)
+            ii = i if small is ip else np.empty(key, dtype=ip)
+            self._work_arrays = (ex, ey, t, j, i, ii, v32, np.empty(key), np.empty((8, poses)))
+            self._work_key = key
+        return self._work_arrays
 
     def sample(self, poses: ArrayLike, angles: ArrayLike, rng: np.random.Generator,
                method: str = "march") -> NDArray[np.float64]:

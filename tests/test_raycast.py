@@ -182,6 +182,23 @@ def test_march_agrees_with_exact(random_case):
     assert np.abs(march - exact).max() < 1e-4
 
 
+@pytest.mark.parametrize("chunk, handover", [(64, 4), (1000, 8), (7200, 2)])
+def test_march_in_chunks_then_the_stragglers_together_stays_exact(random_case, chunk, handover, monkeypatch):
+    """The marcher works on chunks of rays (cache blocking) and hands each chunk's last rays to one common
+    march: any chunk size gives the exact caster's ranges, also with buried sensors and poses off the map."""
+    import localize.raycast as raycast
+
+    g, poses, angles, exact = random_case
+    monkeypatch.setattr(raycast, "_MARCH_CHUNK", chunk)
+    monkeypatch.setattr(raycast, "_MARCH_HANDOVER", handover)
+    assert np.abs(cast(g, poses, angles, 6.0, method="march") - exact).max() < 1e-4
+    buried = np.argwhere(g.obstacles)[:3]
+    inside_wall = np.c_[g.cell_to_world(buried), np.zeros(3)]
+    mixed = np.vstack([inside_wall, poses[:40], [[-50.0, -50.0, 0.0]]])
+    np.testing.assert_allclose(cast(g, mixed, angles, 6.0, "march"), cast(g, mixed, angles, 6.0, "exact"), atol=1e-4)
+    assert (cast(g, inside_wall, angles, 6.0, "march") == 0).all()
+
+
 def test_march_on_axis_aligned_and_grazing_rays(random_case):
     g, poses, _, _ = random_case
     angles = np.array([0.0, np.pi / 2, np.pi, -np.pi / 2, np.pi / 4, 1e-9, np.pi / 2 + 1e-12])

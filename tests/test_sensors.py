@@ -144,6 +144,27 @@ def test_log_likelihood_equals_sum_of_log_pdf(beam):
     np.testing.assert_allclose(beam.log_likelihood_expected(z, zs), want, rtol=1e-9)
 
 
+def test_beam_model_casts_by_the_compact_table_unless_told(grid):
+    """Issue 41: ``BeamModel(grid, 20)`` (a homework call) builds the 8-bit table under its 90 MB budget,
+    not the 16-bit 360-bin one (460 MB on an 800 x 800 map); an explicit method or caster still wins."""
+    plain = BeamModel(grid, 20.0)
+    assert plain.caster.method == "compact"
+    h, w = grid.shape
+    assert plain.caster.compact_table.nbytes <= 90e6 < 2 * 800 * 800 * 360
+    assert plain.caster.compact_table.nbytes < 2 * h * w * 360    # what "lut" would have taken here
+    assert BeamModel(grid, 20.0, method="lut").caster.method == "lut"
+    rc = RayCaster(grid, 20.0, method="march")
+    assert BeamModel(grid, 20.0, caster=rc).caster is rc
+    # the compact default scores scans like the exact caster within its documented range error
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 19)
+    pose = np.array([[6.0, 5.5, 0.3]])
+    exact = BeamModel(grid, 20.0, method="exact")
+    z = exact.expected(pose, angles)[0]
+    err = np.abs(plain.expected(pose, angles) - exact.expected(pose, angles))
+    bound = 2 * grid.resolution + z * np.pi / plain.caster.n_bins + 20.0 / 510
+    assert np.mean(err <= bound) >= 0.9
+
+
 def test_beam_subsampling_and_tempering(grid, caster):
     angles = np.linspace(-1.5, 1.5, 181)
     poses = np.array([[6.0, 5.5, 0.3], [6.2, 5.6, 0.2]])
