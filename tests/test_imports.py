@@ -18,7 +18,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "localize"
 
 #: Presentation: figures, widgets, the homework's self-checks and the command line. Everything else in
 #: the package is an algorithm, a model, a world, a reader or a library pipeline, and may not import these.
-PRESENTATION = ("localize.plot", "localize.widgets", "localize.check", "localize.cli", "localize.__main__")
+PRESENTATION = ("localize.plot", "localize.widgets", "localize.check", "localize.cli", "localize.__main__", "localize.grade")
 
 
 def _module_name(path: Path) -> str:

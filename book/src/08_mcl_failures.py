@@ -118,13 +118,17 @@ plt.show()
 # The localization tutorial among our sources warns about exactly this:
 # symmetric, featureless surroundings make the filter pick a wrong place.
 #
-# What does MCL do with a bimodal belief? Both modes get equal weights on
-# average, but resampling draws a *random* number of offspring for each:
-# one mode ends up with a few more particles, then with more, and eventually
-# the other dies out — a random walk of the split that always ends at 0% or
-# 100% (population geneticists call it genetic drift). After that the filter
-# is sure of one answer, and in half of the runs the answer is the mirror
-# image of the truth.
+# What does MCL do with a bimodal belief? Both modes get equal weights *on
+# average*, but not at any one step: each scan, with its noise, fits one mode a
+# little better than the other, and the likelihood of a whole scan turns a
+# small difference per beam into a large one per particle. Within a few steps
+# one mode holds nearly all the weight, and resampling then removes the other
+# mode's particles for good. (Resampling alone would also end the tie, by a
+# random walk of the split that population geneticists call genetic drift;
+# here the scans decide long before drift could, which is why resampling less
+# often changes nothing: exercise 3.) After that the filter is sure of one
+# answer, and in about half of the runs the answer is the mirror image of the
+# truth.
 
 # %%
 hall = maps.symmetric_room(tell=False)
@@ -166,14 +170,19 @@ for seed in range(8):
 print("outcomes of 8 runs:", results)
 print({k: results.count(k) for k in ("right", "mirror", "lost")})
 assert results.count("lost") == 0 and 2 <= results.count("mirror") <= 6    # "in half of the runs" (of 8: 4 +- 2)
+# "within a few steps one mode holds nearly all the weight": the first step at which one of the two holds 95%
+held = [np.max(s, axis=1) / np.maximum(s.sum(axis=1), 1e-12) >= 0.95 for s in shares.values()]
+decided = [int(np.argmax(h)) if h.any() else None for h in held]
+print("first step at which one mode holds 95% of the weight of the two:", decided)
+assert None not in decided and max(decided) <= 10
 
 # %%
 both = np.minimum(shares[0][:, 0], shares[0][:, 1])
 k_two = int(np.argmax(both))          # the step of run 0 where both modes are heaviest
 fig, axes = plt.subplots(1, 2, figsize=(12, 3.4))
 draw_belief(hall, *tr_h.snapshots[k_two], true_pose=run_h.poses[k_two], ax=axes[0],
-            title=f"step {k_two}: two mirror-image hypotheses "
-                  f"({shares[0][k_two, 0]:.0%} and {shares[0][k_two, 1]:.0%} of the weight)")
+            title=f"step {k_two}: {shares[0][k_two, 0]:.0%} of the weight near the truth, "
+                  f"{shares[0][k_two, 1]:.0%} near its mirror image")
 for seed, s in shares.items():
     axes[1].plot(s[:, 0] / np.maximum(s.sum(axis=1), 1e-12), lw=1)
 axes[1].set_xlabel("step")
@@ -224,7 +233,12 @@ plt.show()
 # ```
 #
 # and, at each resampling, replaces each particle by a random one with
-# probability `max(0, 1 − w_fast / w_slow)`. While the scans fit as well as
+# probability `max(0, 1 − w_fast / w_slow)`. PR writes `w_avg` as the plain
+# mean `(1/M) Σ p(z | x[m])`, for a set that was just resampled (every weight
+# `1/M`); a filter that resamples only when `N_eff` falls carries unequal
+# weights from step to step, and then the same quantity — the likelihood of
+# the scan under the predicted belief — is the weighted mean above. The two
+# agree whenever the weights are equal, as in exercise 4. While the scans fit as well as
 # they used to, `w_fast ≈ w_slow` and nothing is injected. When they suddenly
 # fit much worse, `w_fast` drops first and the injection probability rises.
 # (`localize` keeps both averages as logarithms, since `w_avg` of a full scan
@@ -340,8 +354,12 @@ assert n_recovered["augmented MCL"] > n_recovered["5% injection"] >= n_recovered
 # step 12) and shows its error and the share of particles replaced at every
 # step. Things to try: make `α_fast` slower (0.2) and watch the bursts while
 # localized shrink — and the reaction to the kidnapping too; raise the
-# `temperature` (the `Augmented` option that averages the likelihood per beam
-# rather than per scan) to 36, the number of beams; switch augmented MCL off
+# `temperature` (the `Augmented` option that divides the log-likelihood by
+# this number before it enters the averages: 36, the number of beams, averages
+# per beam rather than per scan, so a scan that fits 10^36 times worse counts
+# as one that fits 10 times worse) to 36 — the bursts while localized stop, and
+# so does the reaction to the kidnapping: with the default settings otherwise,
+# that run never recovers; switch augmented MCL off
 # and give a fixed injection of 0.05 instead; change the robot (seed) to see
 # how much a single run tells. An invalid setting (`α_slow ≥ α_fast`) is
 # reported instead of drawn. (In the HTML book the figure below the widget
@@ -362,6 +380,9 @@ from localize.widgets.recovery import kidnap_summary, kidnap_trial  # noqa: E402
 slow_fast, per_beam = kidnap_summary(*kidnap_trial(alpha_fast=0.2)), kidnap_summary(*kidnap_trial(temperature=36.0))
 assert max(slow_fast["injected_localized"], per_beam["injected_localized"]) < 0.5 * fig.summary["injected_localized"]
 assert slow_fast["recovered"] is None or slow_fast["recovered"] > fig.summary["recovered"]   # ... and react later
+assert per_beam["recovered"] is None                    # the text: at temperature 36 this run never recovers
+print(f"temperature 36: recovered {'never' if per_beam['recovered'] is None else per_beam['recovered']}; "
+      f"alpha_fast 0.2: recovered {slow_fast['recovered']} steps after the kidnapping")
 fig
 
 # %% [markdown]
