@@ -45,7 +45,7 @@ def test_the_state_and_error_in_the_figure_are_the_runs(run):
         fig = wr.reallog_figure(k, run)
         assert fig.state == run.trace.state[k]
         assert fig.error == pytest.approx(err[k])
-        assert fig.axes[0].get_title().startswith(f"scan {k} of {len(run)}: {run.trace.state[k].upper()}")
+        assert fig._suptitle.get_text().startswith(f"scan {k} of {len(run)}: {run.trace.state[k].upper()}")
         plt.close(fig)
     assert run.trace.state[0] == "searching" and run.trace.state[-1] == "localized"
 
@@ -99,3 +99,14 @@ def test_the_widget_slider_spans_the_run(run):
     slider = wid.children[0]
     assert (slider.description, slider.min, slider.max, slider.value) == ("scan", 0, len(run) - 1, 4)
     plt.close("all")
+
+
+def test_the_zoom_panel_is_centred_on_the_estimate(run):
+    k = 30
+    fig = wr.reallog_figure(k, run, zoom=3.0)
+    x, y = run.trace.poses[k, :2]
+    assert fig.axes[1].get_xlim() == pytest.approx((x - 3.0, x + 3.0))
+    assert fig.axes[1].get_ylim() == pytest.approx((y - 3.0, y + 3.0))
+    plt.close(fig)
+    with pytest.raises(ValueError, match="zoom must be a positive number"):
+        wr.reallog_figure(k, run, zoom=0.0)

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from . import interactive_app
+from . import interactive_app, slider
 
 __all__ = ["LogRun", "log_run", "demo_run", "reallog_figure", "reallog_widget", "DEMOS", "DEMO_VARIANTS"]
 
@@ -96,14 +96,15 @@ def _spans(state: NDArray) -> list[tuple[int, int, str]]:
     return [(int(a), int(b), str(state[a])) for a, b in zip(starts, ends)]
 
 
-def _scan_panel(ax: Any, run: LogRun, k: int) -> None:
+def _scan_panel(ax: Any, run: LogRun, k: int, zoom: float | None = None) -> None:
+    """The map, the cloud of scan ``k``, the scan drawn at the estimate; ``zoom``: half-width (m) around it."""
     from ..geometry import compose
     from ..plot import draw_map, draw_robot
 
     tr, log = run.trace, run.log
     draw_map(run.grid, ax=ax)
     parts, w = tr.snapshots[k]
-    ax.scatter(parts[:, 0], parts[:, 1], s=5, color="tab:purple", alpha=0.5, linewidths=0,
+    ax.scatter(parts[:, 0], parts[:, 1], s=5 if zoom is None else 12, color="tab:purple", alpha=0.5, linewidths=0,
                label=f"particles ({int(tr.n_particles[k]):,}, {len(parts)} drawn)", zorder=2)
     est = tr.poses[k]
     r = np.asarray(log.ranges[k], dtype=float)
@@ -111,14 +112,22 @@ def _scan_panel(ax: Any, run: LogRun, k: int) -> None:
     laser = compose(est, log.sensor_offset)
     ends = laser[:2] + r[hit, None] * np.column_stack([np.cos(laser[2] + log.angles[hit]),
                                                        np.sin(laser[2] + log.angles[hit])])
-    ax.plot(ends[:, 0], ends[:, 1], ".", color="tab:blue", ms=4, label="scan drawn at the estimate", zorder=4)
+    ax.plot(ends[:, 0], ends[:, 1], ".", color="tab:blue", ms=4 if zoom is None else 7,
+            label="scan drawn at the estimate", zorder=4)
     draw_robot(est, ax=ax, radius=0.3, color=STATE_COLORS.get(str(tr.state[k]), "k"))
     if run.reference is not None and np.all(np.isfinite(run.reference[k])):
         ax.plot(*run.reference[k, :2], "k+", ms=12, mew=2, label="reference pose", zorder=5)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.legend(loc="lower left", fontsize=7, framealpha=0.85)
+    if zoom is not None:
+        ax.set_xlim(est[0] - zoom, est[0] + zoom)
+        ax.set_ylim(est[1] - zoom, est[1] + zoom)
+    else:
+        x0, x1, y0, y1 = run.grid.extent
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+        ax.set_ylabel("y (m)")
+        ax.legend(loc="lower left", fontsize=7, framealpha=0.85)
 
 
 def _time_panel(ax: Any, run: LogRun, k: int) -> float | None:
@@ -145,8 +154,10 @@ def _time_panel(ax: Any, run: LogRun, k: int) -> float | None:
     return err
 
 
-def reallog_figure(scan: int = 0, run: LogRun | None = None, figsize: tuple[float, float] = (12, 5)):
-    """The callback: scan ``scan`` of ``run`` (default :func:`demo_run`) over the map, and the state over the run.
+def reallog_figure(scan: int = 0, run: LogRun | None = None, zoom: float = 4.0,
+                   figsize: tuple[float, float] = (15, 4.8)):
+    """The callback: scan ``scan`` of ``run`` (default :func:`demo_run`) over the map, around the estimate
+    (``zoom`` metres each way), and the state over the run.
 
     Returns a Figure whose ``state`` attribute is the filter's state at that scan
     and ``error`` its position error against the reference (None without one).
@@ -172,9 +183,14 @@ def reallog_figure(scan: int = 0, run: LogRun | None = None, figsize: tuple[floa
     k = int(scan)
     if k not in run.trace.snapshots:
         raise ValueError(f"the run kept no particles of scan {k}: make it with log_run (snapshots of every scan)")
+    if not float(zoom) > 0:
+        raise ValueError(f"zoom must be a positive number of metres; got {zoom!r}")
     fig = Figure(figsize=figsize)
-    ax, ax2 = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.25, 1.0]})
+    ax, ax_zoom, ax2 = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1.0, 0.8, 1.0]})
     _scan_panel(ax, run, k)
+    _scan_panel(ax_zoom, run, k, zoom=float(zoom))
+    ax_zoom.set_title(f"around the estimate (±{float(zoom):g} m): the scan\nlies on the walls if the estimate is "
+                      "right", fontsize=9)
     err = _time_panel(ax2, run, k)
     state = str(run.trace.state[k])
     fit = run.trace.fit[k]
@@ -186,22 +202,23 @@ def reallog_figure(scan: int = 0, run: LogRun | None = None, figsize: tuple[floa
         words.append(f"fit {fit:.0%}")
     if not run.trace.updated[k]:
         words.append("scan not used (robot did not move enough)")
-    ax.set_title(", ".join(words), fontsize=9)
+    fig.suptitle(", ".join(words), fontsize=11)
+    ax.set_title("the map and the particle cloud", fontsize=9)
     ax2.set_title("the whole run: error and state (blue line: this scan)", fontsize=9)
-    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.11, top=0.92, wspace=0.18)
+    fig.subplots_adjust(left=0.05, right=0.99, bottom=0.11, top=0.84, wspace=0.22)
     fig.state = state
     fig.error = err
     return fig
 
 
-def reallog_widget(run: LogRun | None = None, scan: int = 0):
+def reallog_widget(run: LogRun | None = None, scan: int = 0, zoom: float = 4.0):
     """A slider over the scans of ``run`` (default :func:`demo_run`); see :func:`reallog_figure`.
 
     Examples
     --------
     >>> wid = reallog_widget()
-    >>> [c.description for c in wid.children[:1]], wid.children[0].max
-    (['scan'], 79)
+    >>> [c.description for c in wid.children[:2]], wid.children[0].max
+    (['scan', 'zoom [m]'], 79)
     >>> import matplotlib.pyplot as plt; plt.close("all")
     """
     import ipywidgets as W
@@ -212,11 +229,12 @@ def reallog_widget(run: LogRun | None = None, scan: int = 0):
         scan=W.IntSlider(value=int(scan), min=0, max=len(run) - 1, step=1, description="scan",
                          continuous_update=False),
         run=W.fixed(run),
-        figsize=W.fixed((12, 5)),
+        zoom=slider(float(zoom), 1.0, 10.0, 0.5, "zoom [m]", fmt=".1f"),
+        figsize=W.fixed((15, 4.8)),
     )
 
 
 #: Zero-argument demos returning the widget's default figure (see tests/test_widgets_common.py).
 DEMOS = {"reallog": lambda: reallog_figure()}
 #: Other settings whose figures must differ from the default.
-DEMO_VARIANTS = {"reallog": [lambda: reallog_figure(40), lambda: reallog_figure(79)]}
+DEMO_VARIANTS = {"reallog": [lambda: reallog_figure(40), lambda: reallog_figure(79), lambda: reallog_figure(zoom=8.0)]}
