@@ -18,20 +18,18 @@
 #
 # Everything so far ran on simulated robots whose every convention we chose
 # ourselves. Real data arrives in files written by other people, for other
-# programs, years ago. Students of the CMU 16-831 course receive a map of Wean
-# Hall and a few robot logs in a home-grown text format; engineers meet CARMEN
-# logs from the Radish archive and maps saved by ROS `map_server`. Each format is
-# simple, and each hides a trap that silently turns a working localizer into one
+# programs, years ago: the CMU 16-831 course's map of Wean Hall and its robot
+# logs, CARMEN logs from the Radish archive, maps saved by ROS `map_server`.
+# Each format is simple, and each hides a trap that silently turns a working localizer into one
 # that never converges: a map stored as the probability of *free* space, a map
 # whose text lines are columns, ranges in centimetres, a laser mounted 25 cm ahead
 # of the robot's centre, readings of 81.83 m that mean "nothing there".
 #
 # This chapter walks through those traps on a log that our simulator writes in
 # the CMU format, so that it runs anywhere. Then it builds a map from a log with
-# known poses (occupancy grid mapping), runs the command-line localizer on the
-# real Intel lab log, and meets the few rules beyond chapter 7's loop that a
-# real log needs. Why each default of the command line has the value it has,
-# measured on five buildings, is told in the appendix,
+# known poses, runs the command-line localizer on the real Intel lab log, and
+# meets the few rules beyond chapter 7's loop that a real log needs. The
+# measurements behind the command line's defaults are in the appendix,
 # [Why the defaults are what they are](13_appendix_defaults.ipynb).
 
 # %%
@@ -200,9 +198,8 @@ for name, ll in cases.items():
 # sensor models apply it (`sensor_offset`): the filter estimates the pose of the
 # robot's *centre*, which is what the odometry describes, and each scan is taken
 # from `pose ⊕ offset`. Ignoring 25 cm shifts every end point by 25 cm along the
-# heading — an error of the same size as a real map's own inaccuracy, and one
-# that does not average out, since it rotates with the robot (last line above).
-#
+# heading, an error that does not average out, since it rotates with the robot
+# (last line above).
 #
 # ## Trap 5: "no return" is not a wall
 #
@@ -214,14 +211,12 @@ for name, ll in cases.items():
 # file's maximum (`log.no_return`); the likelihood field skips them and the beam
 # model gives them their own mixture component (PR table 6.1).
 #
-# A CMU file does not say what its laser's maximum is. The reader therefore
-# takes **80 m** (`io.cmu.CMU_MAX_RANGE`) as the threshold: every reading at or
-# above 8000 cm is "no return", the 8183 cm that the course's scanner writes and
-# any other large value a logger may have written. That is why the cell below
-# prints a maximum of 80 m beside readings stored as 81.83 m. Our simulated
-# laser reaches only 12 m; a file cannot say so, so its "no return" readings are
-# written as 8183 cm like the real scanner's, and every real reading is shorter
-# than 12 m.
+# A CMU file does not say what its laser's maximum is, so the reader takes
+# **80 m** (`io.cmu.CMU_MAX_RANGE`) as the threshold: every reading at or above
+# 8000 cm, the scanner's 8183 cm included, is "no return". That is why the cell
+# below prints a maximum of 80 m beside readings stored as 81.83 m. (Our
+# simulated laser reaches only 12 m; its "no return" readings are written as
+# 8183 cm, like the real scanner's.)
 
 # %%
 print("maximum range of the log:", log.max_range, "m  (io.cmu.CMU_MAX_RANGE; no return at or above it)")
@@ -238,11 +233,10 @@ assert np.all(log.ranges[log.no_return] >= 81.8) and log.ranges[~log.no_return].
 # the distance field treat them as obstacles, while a global localizer draws its
 # initial particles only from *known free* cells.
 #
-# Real maps are also simply wrong. In the Wean Hall map the walls are drawn
-# roughly 10-15 cm thicker than the laser sees them, and some furniture has moved
-# since the map was made. A sensor model whose `sigma_hit` is a few centimetres
-# — the laser's own noise — punishes the *true* pose for the map's mistakes. The
-# command-line localizer therefore uses `sigma_hit = 0.2 m`, looks at 30 beams
+# Real maps are also wrong: the Wean Hall map draws walls 10-15 cm thicker than
+# the laser sees them, and furniture has moved. A `sigma_hit` of a few
+# centimetres — the laser's own noise — punishes the *true* pose for the map's
+# mistakes. The command-line localizer therefore uses `sigma_hit = 0.2 m`, looks at 30 beams
 # per scan, and multiplies each scan's log-likelihood by a factor 0.3
 # (`temper`): neighbouring beams are far from independent, and an over-confident
 # filter locks onto the first place that looks right (PR section 6.3.4).
@@ -339,11 +333,11 @@ for x in (1.0, 2.99, 3.5):
     print(f"cell at x = {x:4.2f} m in front of a reading of 3 m: log-odds {l_cell:+.2f}")
 
 # %% [markdown]
-# `mapping.OccupancyMapper` applies the same model along each beam instead of per
-# cell, which is what practical mappers do: cells the beam crosses are free, the
-# cell where it ends is occupied, a "no return" teaches nothing. Probabilities are
-# clamped to [0.12, 0.97] so that a map can still change when a door opens.
-# We build the office from the simulated scans and the robot's *true* poses:
+# `mapping.OccupancyMapper` applies the model along each beam, as practical
+# mappers do: cells the beam crosses are free, the cell where it ends is
+# occupied, a "no return" teaches nothing; probabilities are clamped to
+# [0.12, 0.97], so that a map can still change when a door opens. We build the
+# office from the simulated scans and the robot's *true* poses:
 
 # %%
 built = mapping.map_from_log(io.LaserLog(times=log.times, odometry=log.odometry, ranges=log.ranges,
@@ -377,14 +371,12 @@ print("built map:", built)
 # %% [markdown]
 # ## The command-line localizer
 #
-# `python -m localize run` (installed as `localize`) puts everything together: it
-# detects the formats from the files' contents, spreads particles uniformly over
-# the map's free space, and filters every scan — odometry motion, likelihood
-# field, resampling — writing one estimate per scan to `trajectory.csv`
-# (`time,x,y,theta`, the robot centre in the map frame) and the run's numbers to
-# `summary.json`. On a terminal it draws a progress bar; `--animate` adds a GIF
-# of the particle cloud. `localize run --help` documents every option with an
-# example.
+# `localize run` (or `python -m localize run`) puts everything together: it
+# detects the formats from the files' contents, spreads particles over the map's
+# free space, and filters every scan, writing one estimate per scan to
+# `trajectory.csv` (the robot centre in the map frame, and the filter's state)
+# and the run's numbers to `summary.json`; `--animate` adds a GIF of the cloud.
+# `localize run --help` documents every option with an example.
 
 # %%
 status = cli.main(["run", "--map", str(map_file), "--log", str(log_file), "--particles", "3000",
@@ -414,22 +406,21 @@ plt.show()
 # %% [markdown]
 # ## A real log, one command
 #
-# Now real data: the Intel Research Lab log (CARMEN format, 910 scans of a
-# robot driving through an office floor, with SLAM-corrected poses but no map).
-# `--build-map` builds the map from the corrected poses, as in the section on
-# mapping; `--scans 0:300` keeps the first 300 scans so that the cell takes a
-# few seconds; and the filter starts with particles all over the map: global
-# localization, with every other setting at its default.
+# Now real data: the Intel Research Lab log (CARMEN format, a robot driving
+# through an office floor, with SLAM-corrected poses but no map). `--build-map`
+# builds the map from the corrected poses, as in the section on mapping;
+# `--scans 0:300` keeps the first 300 scans, so that the cell takes seconds; the
+# filter starts with particles all over the map (global localization), every
+# other setting at its default.
 #
 # ```bash
 # localize run --log ../shared/data/carmen/intel-corrected.log.gz --build-map --resolution 0.1 \
 #              --scans 0:300 --seed 0 --out out/intel
 # ```
 #
-# If the data sits beside the book (`../shared/data`, or a folder named by the
-# environment variable `LOCALIZE_DATA`), the next cell runs exactly this
-# command and prints what it says on the terminal; without the data, it says
-# so, and the cells on the Intel log do nothing.
+# If the data sits beside the book (`../shared/data`, or the folder named by
+# the environment variable `LOCALIZE_DATA`), the next cell runs this command;
+# without the data, the cells on the Intel log do nothing.
 
 # %% tags=["nbval-ignore-output"]
 data = Path(os.environ.get("LOCALIZE_DATA", "../../shared/data"))
@@ -445,17 +436,16 @@ else:
 
 # %% [markdown]
 # The terminal reports the run's speed, the filter's own account of itself —
-# *searching*, *localized* or *lost*, from evidence it has, never from the
-# corrected poses — and the error against the corrected poses, counted only at
-# the scans the filter called localized.
+# *searching*, *localized* or *lost*, from its own evidence, never from the
+# corrected poses — and the error against the corrected poses at the scans it
+# called localized.
 #
-# `localize run` is a thin layer over the library `localize.pipeline`: it reads
-# the files (`pipeline.read_inputs`), runs `pipeline.localize_log` and writes
-# the outputs. For pictures we call the library ourselves, with the same
-# settings and seed, and keep the particles of every scan
-# (`localize.widgets.reallog.log_run`); the cell checks that this is the
-# command's trajectory. `localize.plot.report.report_figure` draws a run over
-# its map, each estimate coloured by the state the filter was in:
+# `localize run` is a thin layer over the library `localize.pipeline`
+# (`read_inputs`, `localize_log`). For pictures we call the library with the
+# same settings and seed, keeping the particles of every scan
+# (`localize.widgets.reallog.log_run`; the cell checks that it gives the
+# command's trajectory), and draw the run over its map with
+# `localize.plot.report.report_figure`:
 
 # %% tags=["nbval-ignore-output"]
 from localize.plot.report import report_figure  # noqa: E402
@@ -480,32 +470,29 @@ if have_intel:    # what the text says about this run, with margins for another 
     assert np.median(err_i[:5]) > 1.0                                  # the first estimates are far off
 
 # %% [markdown]
-# Left: the map built from the corrected poses (black), the corrected path
-# (thin black line) and the estimate of each scan. At the first scans the
-# particles cover the whole floor and the estimate, the best of many
-# hypotheses, is metres off; a few scans later the cloud has gathered on the
-# robot and the state turns *localized* (green). Right: the error against the
+# Left: the map, the corrected path (thin black line) and the estimate of each
+# scan. At the first scans the particles cover the whole floor and the
+# estimate, the best of many hypotheses, is metres off; a few scans later the
+# cloud has gathered on the robot and the state turns *localized* (green). Right: the error against the
 # corrected poses over the run, with the state behind it. The error of the
 # localized scans stays at a few centimetres, under the map's 10 cm cells.
 #
 # ## What a real log needs beyond the textbook loop
 #
 # Chapter 7 printed the loop that runs the filter, `localize.runloop.run`:
-# predict, update, estimate, resample, and at a few named points a call to a
-# **policy**. Chapter 8 met the policies that recover a lost robot. A real log
-# needs three more, each small and each there to prevent one failure:
+# predict, update, estimate, resample, and at named points a call to a
+# **policy**; chapter 8 met the policies that recover a lost robot. A real log
+# needs three more, each there to prevent one failure:
 #
 # | policy (`localize.policies`) | the failure it prevents | what it does |
 # |---|---|---|
-# | `OdometryCheck` | a corrupt odometry record (a pose of 10⁶ m, a NaN) throws every particle off the map, and the filter starts from nothing | an odometry step longer than the map's diagonal, or not finite, is refused: the particles stay where they were, and `events` says so |
-# | `MotionGate` | a robot standing still sends the same scan again and again; used every time, it is counted as new evidence, and the cloud grows over-confident (chapter 8's deprivation) | a scan is used only after the odometry has moved 0.2 m or turned 0.3 rad since the last used scan (`--min-motion`, AMCL's `update_min_d`, `update_min_a`) |
-# | `BeamMasks` | a person or a chair the map does not show stops some beams short; scored, they let a few particles at a wrong place win | once the cloud agrees on one place, beams that read more than 1 m shorter than the map from there (`--skip-short-beams`), or end in the map's unknown cells (`--unknown-beams`), are left out of the update |
+# | `OdometryCheck` | a corrupt odometry record (a pose 1 km away, a NaN) throws every particle off the map | a step longer than the map's diagonal, or not finite, is refused: the particles stay put, and `events` says so |
+# | `MotionGate` | a robot standing still sends the same scan again and again; each use counts it as new evidence, and the cloud grows over-confident (chapter 8) | a scan is used only after the odometry moved 0.2 m or turned 0.3 rad since the last used one (`--min-motion`, AMCL's `update_min_d`/`update_min_a`) |
+# | `BeamMasks` | a chair the map does not show stops beams short; scored, they let particles at a wrong place win | once the cloud agrees, beams reading more than 1 m shorter than the map there (`--skip-short-beams`), or ending in unknown cells (`--unknown-beams`), are left out |
 #
-# And the **state** (`StateRules` and `ThresholdState`, chapter 8): the filter
-# says *localized* only when its evidence agrees — most of the weight in one
-# tight cluster, scans that fit the map at the estimate — and *lost* when it
-# stops agreeing. We watch all three policies on the simulated log, with one
-# odometry record corrupted the way a serial line corrupts it: a pose 1 km away.
+# And the **state** (`StateRules`, `ThresholdState`, chapter 8). We watch the
+# three policies on the simulated log, one odometry record corrupted to a pose
+# 1 km away:
 
 # %%
 corrupt = np.array(log.odometry, copy=True)
@@ -530,23 +517,19 @@ assert settings.DEFAULTS["min_motion"] == (0.2, 0.3) and settings.DEFAULTS["skip
 #
 # ### The state, in plain words
 #
-# The state uses no ground truth; every row of `trajectory.csv` carries it, and
-# errors against a reference are reported only for the scans called localized.
-# A scan is *confident* when four things hold:
+# The state uses no ground truth. A scan is *confident* when four things hold:
 #
 # 1. **one hypothesis**: the best cluster of particles holds at least 80% of
 #    the weight, within 0.5 m and 20°;
-# 2. **the scans fit the map there**: cast rays from the estimate through the
-#    map, and count the beams whose reading agrees with the cast range (within
-#    twice `sigma_hit`). Over the last five scans, at least 60% of the share a
-#    correct pose gets must agree. This catches a cloud that agrees with itself
-#    on a wrong room. Beams whose ray ends in an unknown cell cannot be judged;
-#    and after the filter has been lost, only fits made since count — the fits
-#    of the old place say nothing about the new one;
+# 2. **the scans fit the map there**: of the beams cast from the estimate
+#    through the map, enough agree with their readings (within twice
+#    `sigma_hit`; over the last five scans, at least 60% of the share a correct
+#    pose gets). This catches a cloud that agrees with itself on a wrong room.
+#    After the filter has been lost, only fits made since count: the old
+#    place's fits say nothing about the new one;
 # 3. **the scan pins the pose**: moved 1 m forwards, backwards, left or right,
-#    the estimate must fit the scan clearly worse. In a featureless corridor
-#    every stretch fits equally well, and a tight cloud there has only
-#    resampled itself small;
+#    the estimate must fit the scan clearly worse; in a featureless corridor
+#    every stretch fits equally well;
 # 4. **readings to judge**: at least five per scan within the sensor's range.
 #
 # Three confident scans in a row make the state *localized*; three that are
@@ -619,31 +602,33 @@ Markdown("\n".join(rows))
 #
 # ## Replay a run, scan by scan
 #
-# The report figure shows the whole run at once. The widget below replays the
-# Intel run (or, without the data, the simulated one) one scan at a time: left,
-# the map with the particle cloud after that scan's update (purple), the scan
-# drawn from the **estimate** (blue dots: on the walls when the estimate is
-# right), the estimate coloured by the state, and the corrected pose (black
-# cross); right, the error over the whole run with the state behind it and the
-# chosen scan marked. Slide to the first scans to see the search, then to where
-# the state changes. (In the HTML book the figure below the widget shows one
-# scan.)
+# The widget replays the Intel run (without the data, a simulated one) one
+# scan at a time. Left: the map and the particle cloud after that scan's
+# update. Middle: a close-up around the estimate, with the scan drawn from the
+# **estimate** (blue dots: on the walls when the estimate is right), the
+# estimate coloured by the state and the corrected pose (black cross). Right:
+# the error over the run, the state behind it. Slide to the first scans to
+# watch the search, then to where the state changes. (The HTML book shows scan
+# 3 below the widget: the cloud still in several clumps, one of them on the
+# robot.)
 
 # %% tags=["nbval-ignore-output"]
 replay = intel if have_intel else None      # None: the widget's own simulated run
 reallog_widget(replay, scan=3)
 
 # %%
-reallog_figure(3) if replay is None else reallog_figure(3, replay)
+fig = reallog_figure(3) if replay is None else reallog_figure(3, replay)
+assert fig.state == "searching"
+fig
 
 # %% [markdown]
 # ## Your robot: ROS bags in, AMCL settings in, standard trajectories out
 #
-# Your own robot records ROS bags, its map was saved by `map_server` (or
-# `nav2_map_server`'s `map_saver_cli`), and it already runs AMCL with a parameter
-# file. `localize` reads all three without a ROS installation (`pip install -e
-# ".[ros]"` adds the pure-Python [rosbags](https://ternaris.gitlab.io/rosbags/)
-# package), and writes its estimate in the formats the evaluation tools read.
+# Your own robot records ROS bags, its map was saved by `map_server`, and it
+# runs AMCL with a parameter file. `localize` reads all three without a ROS
+# installation (`pip install -e ".[ros]"` adds the pure-Python
+# [rosbags](https://ternaris.gitlab.io/rosbags/) package) and writes what the
+# evaluation tools read.
 #
 # 1. **Record** the laser, the odometry and the transforms while you drive
 #    around (ROS 2; `rosbag record` on ROS 1):
@@ -746,14 +731,7 @@ print("scans:", len(t_tum), "| first time stamp:", round(float(t_tum[0]), 1), "s
 print("within 0.5 m of the truth from scan", k0, f"| median APE afterwards {np.median(ape[k0:]):.1f} m")
 
 # %% [markdown]
-# **Where the public logs live.** The CARMEN logs come from
-# [Radish, the Robotics Data Set Repository](http://radish.sourceforge.net/)
-# (Howard and Roy, 2003), their corrected versions from the Freiburg SLAM
-# benchmark (<http://ais.informatik.uni-freiburg.de/slamevaluation/datasets.php>,
-# Kümmerle et al., 2009): free for research, crediting each contributor. The
-# CMU 16-831 data comes with Carnegie Mellon's course assignment, with no
-# licence stated: use it for study, do not redistribute it. The Willow Garage
-# map ships with ROS (BSD licence). None of these files is in this repository.
+# **Where the public logs live**, and their licences: see the appendix.
 #
 # ## Tuning the models from your robot's data
 #
@@ -830,14 +808,12 @@ assert 0.0 < rho < 0.5
 # ### Try it: tempering and `sigma_hit`
 #
 # The widget scores one cluttered scan of 72 beams with either model. Left: the
-# weight one scan gives to positions around the true pose (the heading held at
-# the truth) — how sharply the filter would believe this scan. Right: the
-# effective sample size of about 1800 particles spread around the truth, as a
-# function of the tempering factor; the dot is your setting. Untempered, a few
-# dozen particles take all the weight; at $\gamma = 0.1$ the 72 beams count as seven and
-# hundreds of particles survive. A small `sigma_hit` sharpens the weight the way
-# a large tempering factor does. (In the HTML book the figure below the widget
-# shows the default setting.)
+# weight one scan gives to positions around the true pose (heading held at the
+# truth). Right: the effective sample size of particles spread around the
+# truth, against the tempering factor; the dot is your setting. At
+# $\gamma = 0.1$ the 72 beams count as seven. A small `sigma_hit` sharpens the
+# weight as a large tempering factor does. (The HTML book shows the default
+# setting below the widget.)
 
 # %% tags=["nbval-ignore-output"]
 from localize.widgets.tuning import tuning_figure, tuning_widget  # noqa: E402
@@ -853,13 +829,11 @@ fig
 # %% [markdown]
 # ## Summary
 #
-# * Read the file format's definition, then *plot* what you read: a map over its
-#   scans shows inverted probabilities, mirrored axes, wrong units, reversed
-#   beams and a forgotten laser offset at a glance.
-# * Convert once, at the border: `localize.io` turns every format into metres,
-#   radians, an `OccupancyGrid` of occupancy probabilities (NaN unknown) and a
-#   `LaserLog`.
-# * Bad input is an error with a file and a line, never a half-read result.
+# * Read the format's definition, then *plot* what you read: a scan over its map
+#   shows inverted probabilities, mirrored axes, wrong units, reversed beams and
+#   a forgotten laser offset at a glance.
+# * Convert once, at the border (`localize.io`): metres, radians, occupancy
+#   probabilities; bad input is an error with a file and a line.
 # * Real maps and scans disagree by 0.1 m or more: choose `sigma_hit` for the map,
 #   not for the laser, and temper the likelihood.
 # * With known poses, a map is a sum of log-odds (occupancy grid mapping).
@@ -867,11 +841,9 @@ fig
 #   chapter 7 with a few policies a real log needs: corrupt odometry is refused,
 #   a standing robot's scans are not reused, beams the map cannot explain are
 #   left out once the cloud agrees.
-# * A filter must say when it does not know: searching, localized or lost, from
-#   the cluster weight, the spread and whether the scans fit the map — never
-#   from ground truth. Replay a run scan by scan to see why it said what it said.
-# * Each default prevents one measured failure; the appendix
-#   [Why the defaults are what they are](13_appendix_defaults.ipynb) has the numbers.
+# * A filter must say when it does not know — searching, localized or lost —
+#   from its own evidence, never from ground truth.
+# * Each default prevents one measured failure; the appendix has the numbers.
 
 # %% [markdown]
 # ## Exercises

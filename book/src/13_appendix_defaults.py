@@ -22,7 +22,8 @@
 # that measured them (`benchmarks/bench_global.py`, its tables read from
 # `benchmarks/RESULTS.md`, so these cells need no data), the odometry
 # surprises of the Freiburg log, the offline smoother, the command line's
-# speed, and the mapping of ROS AMCL's parameters. It is a reference, to read
+# speed, the mapping of ROS AMCL's parameters and where the public logs come
+# from. It is a reference, to read
 # when a default surprises you, not in one sitting.
 
 # %%
@@ -585,3 +586,15 @@ if speed:
 # an ad-hoc cure for correlated beams, where `localize` multiplies the beams'
 # likelihoods and tempers the product (`--temper`); and options written on the
 # command line win over the file.
+
+# %% [markdown]
+# ## Where the public logs live
+#
+# The CARMEN logs come from
+# [Radish, the Robotics Data Set Repository](http://radish.sourceforge.net/)
+# (Howard and Roy, 2003), their corrected versions from the Freiburg SLAM
+# benchmark (<http://ais.informatik.uni-freiburg.de/slamevaluation/datasets.php>,
+# Kümmerle et al., 2009): free for research, crediting each contributor. The
+# CMU 16-831 data comes with Carnegie Mellon's course assignment, with no
+# licence stated: use it for study, do not redistribute it. The Willow Garage
+# map ships with ROS (BSD licence). None of these files is in this repository.
