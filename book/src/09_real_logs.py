@@ -609,8 +609,7 @@ Markdown("\n".join(rows))
 # estimate coloured by the state and the corrected pose (black cross). Right:
 # the error over the run, the state behind it. Slide to the first scans to
 # watch the search, then to where the state changes. (The HTML book shows scan
-# 3 below the widget: the cloud still in several clumps, one of them on the
-# robot.)
+# 3 below the widget, while the filter is still searching.)
 
 # %% tags=["nbval-ignore-output"]
 replay = intel if have_intel else None      # None: the widget's own simulated run
