@@ -133,7 +133,7 @@ def test_freiburg_odometry_glitch_is_real(logs):
 
 
 def test_freiburg_odometry_never_reports_backing_up(logs):
-    """Chapter 9's explanation of Freiburg's failures: the odometry's speed has no sign, and the two start scans
+    """The appendix's (book/13_appendix_defaults) explanation of Freiburg's failures: the odometry's speed has no sign, and the two start scans
     that fail at every seed are the runs in which the robot backs up most often."""
     log = logs["freiburg-079"]
     m, c = log.motions(), relative(log.poses[:-1], log.poses[1:])
@@ -147,10 +147,10 @@ def test_freiburg_odometry_never_reports_backing_up(logs):
 
 
 def test_freiburg_odometry_creeps_sideways_while_the_robot_turns_on_the_spot(logs):
-    """Chapter 9: in 117 of Freiburg's steps the odometry point moves a few millimetres *sideways* while the robot
+    """The appendix (book/13_appendix_defaults, which computes them too): in 117 of Freiburg's steps the odometry point moves a few millimetres *sideways* while the robot
     turns (the corrected poses move 2 cm, median); as "turn towards the destination, drive, turn" (PR table 5.6)
     those steps get rot1 near 90 degrees and a translation noise of about half a metre; ReversibleOdometry counts
-    them as turns on the spot, with a few centimetres (chapter 9's numbers)."""
+    them as turns on the spot, with a few centimetres (the appendix's numbers)."""
     from localize.motion import ReversibleOdometry, odometry_to_control, odometry_variances
 
     log = logs["freiburg-079"]
@@ -161,7 +161,7 @@ def test_freiburg_odometry_creeps_sideways_while_the_robot_turns_on_the_spot(log
     spot = np.array([move.min_trans < tt <= move.on_the_spot(tt, th) for tt, th in zip(t, s[:, 2])])
     rot1, trans, rot2 = odometry_to_control(od[:-1], od[1:], move.min_trans)
     sideways = spot & (np.minimum(np.abs(rot1), np.pi - np.abs(rot1)) > np.pi / 4)
-    assert sideways.sum() == 117, sideways.sum()                                   # chapter 9
+    assert sideways.sum() == 117, sideways.sum()                                   # the appendix
     assert np.median(t[sideways]) < 0.01 and np.median(np.hypot(*c[sideways, :2].T)) < 0.03
     textbook = np.sqrt(odometry_variances(rot1, trans, rot2, cli.DEFAULTS["alphas"])[1][sideways])
     on_spot = np.array([move.on_the_spot(tt, th) for tt, th in zip(t[sideways], s[sideways, 2])])
@@ -182,7 +182,7 @@ def test_the_scans_reverse_only_steps_in_which_the_robot_backed_up(shared_data, 
     assert chk.checked > 0.75 * np.sum(np.hypot(*log.motions()[:, :2].T) >= 0.05)
     if name == "freiburg-079":
         assert not reports_reversing(log.odometry)
-        assert (chk.reversed.size, chk.checked) == (77, 3631), (chk.reversed.size, chk.checked)   # chapter 9
+        assert (chk.reversed.size, chk.checked) == (77, 3631), (chk.reversed.size, chk.checked)   # the appendix
         assert np.all(c[chk.reversed, 0] < 0)                             # not one wrong reversal
         backing = (c[:, 0] < -0.05) & (np.hypot(*log.motions()[:, :2].T) >= 0.05)
         assert np.isin(np.flatnonzero(backing), chk.reversed).mean() > 0.9  # and nearly every clear one found
