@@ -160,15 +160,56 @@ class Progress(tqdm):
 
 
 # ============================================================================ outputs
-def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = None) -> Path:
-    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state`` (+ reference and error)."""
+#: The pose covariance's columns of ``trajectory.csv`` and their (row, column) in the 3x3 covariance of x, y, theta.
+COV_COLUMNS = {"cov_xx": (0, 0), "cov_xy": (0, 1), "cov_xtheta": (0, 2), "cov_yy": (1, 1), "cov_ytheta": (1, 2),
+               "cov_thetatheta": (2, 2)}
+
+
+def pose_covariances(res: RunResult) -> NDArray:
+    """``(T, 3, 3)``: the covariance of x, y, theta behind each estimate of ``res``.
+
+    For one pass, the weighted covariance of the best cluster
+    (:attr:`localize.runloop.RunTrace.cov`). For ``--smooth``, the covariance
+    of the pass whose estimate is used at the scan; where both passes agree
+    and the estimate is their weighted mean, the two covariances fused as
+    independent estimates, ``(Cf^-1 + Cb^-1)^-1`` (the two passes share only
+    the scan itself, so this is slightly over-confident).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> c = np.repeat(np.eye(3)[None] * 0.04, 2, axis=0)
+    >>> pose_covariances(SimpleNamespace(covariances=c, smooth=None))[0, 0, 0]
+    0.04
+    """
+    sm = getattr(res, "smooth", None)
+    cf = None if sm is None else getattr(sm.forward, "cov", None)
+    cb = None if sm is None else getattr(sm.backward, "cov", None)
+    if cf is None or cb is None:
+        return np.asarray(res.covariances, dtype=float)
+    pick_b = sm.source == "backward" if sm.from_backward is None else sm.from_backward
+    out = np.where(np.asarray(pick_b)[:, None, None], cb, cf)
+    both = np.asarray(sm.source) == "both"
+    if both.any():
+        reg = 1e-12 * np.eye(3)
+        out[both] = np.linalg.inv(np.linalg.inv(cf[both] + reg) + np.linalg.inv(cb[both] + reg))
+    return out
+
+
+def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = None,
+                     covariances: NDArray | None = None) -> Path:
+    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state`` (+ reference and error, the smoother's
+    columns), then the pose covariance ``cov_xx ... cov_thetatheta`` (:data:`COV_COLUMNS`; ``covariances``,
+    default :func:`pose_covariances`)."""
     cols = ["time", "x", "y", "theta", "spread", "n_eff", "state"]
     state = res.state if res.state is not None else np.full(len(res.times), "")
     if reference is not None:
         cols += ["ref_x", "ref_y", "ref_theta", "error"]
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
     extra = getattr(res, "columns", None) or {}  # more per-scan columns (localize.smooth: passes, source)
-    cols += list(extra)
+    cols += list(extra) + list(COV_COLUMNS)
+    cov = pose_covariances(res) if covariances is None else np.asarray(covariances, dtype=float)
+    cov_terms = np.stack([cov[:, i, j] for i, j in COV_COLUMNS.values()], axis=1)
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(cols)
@@ -177,7 +218,7 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
                    f"{res.n_eff[k]:.1f}", str(state[k])]
             if reference is not None:
                 row += [*(f"{v:.6f}" for v in reference[k]), f"{err[k]:.4f}"]
-            w.writerow(row + [str(v[k]) for v in extra.values()])
+            w.writerow(row + [str(v[k]) for v in extra.values()] + [f"{v:.6g}" for v in cov_terms[k]])
     return path
 
 
@@ -201,6 +242,7 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
         "convergence_criterion": (f"first scan from which the particles' position spread (or, for *_reference, "
                                   f"the error) stays below the threshold for {hold} scans"),
         "final_estimate": [round(float(v), 4) for v in res.estimates[-1]],
+        "final_pose": final_pose(res),
     }
     if not reliable:
         out["real_time_factor_note"] = "the log's time stamps are not usable (too coarse or out of order)"
@@ -231,6 +273,52 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
             out["localized_scans_over_1m_off"] = int(np.sum(loc & (err > 1.0)))
     out["settings"] = settings
     return out
+
+
+def final_pose(res: RunResult) -> dict:
+    """The last scan's estimate and its covariance (x, y, theta; metres and radians), as ``summary.json`` holds it.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> r = SimpleNamespace(estimates=np.array([[1.0, 2.0, 0.5]]), covariances=np.eye(3)[None] * 0.01, smooth=None,
+    ...                     times=np.array([3.0]), state=np.array(["localized"]))
+    >>> fp = final_pose(r)
+    >>> fp["x"], fp["theta"], fp["std"], fp["state"]
+    (1.0, 0.5, [0.1, 0.1, 0.1], 'localized')
+    """
+    x, y, th = (round(float(v), 4) for v in res.estimates[-1])
+    c = pose_covariances(res)[-1]
+    state = getattr(res, "state", None)
+    return {"time": round(float(res.times[-1]), 6), "x": x, "y": y, "theta": th,
+            "covariance": [[float(f"{v:.6g}") for v in row] for row in c],
+            "std": [round(float(np.sqrt(max(c[i, i], 0.0))), 4) for i in range(3)],
+            "state": None if state is None else str(state[-1])}
+
+
+def write_report(path: Path, grid: OccupancyGrid, res: RunResult, reference: NDArray | None = None,
+                 title: str | None = None, dpi: int = 90) -> Path:
+    """Save ``report.png``: :func:`localize.plot.report.report_figure` of the run (the final cloud is the last
+    scan's snapshot, which :func:`localize.pipeline.localize_log` always keeps).
+
+    The second panel's axis is the time since the first scan when the log's
+    time stamps increase, else the scan index.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from .plot.report import report_figure
+
+    t = np.asarray(res.times, dtype=float)
+    times = t - t[0] if len(t) > 1 and np.all(np.diff(t) > 0) else None
+    fig = report_figure(grid, res.trace, reference, times=times, title=title)
+    try:
+        fig.savefig(path, dpi=dpi)
+    finally:
+        plt.close(fig)
+    return path
 
 
 def write_summary(path: Path, summary: dict) -> Path:
@@ -415,6 +503,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_resolution(g, "a map built with --build-map")
     g.add_argument("--not-free-is-occupied", action="store_true",
                    help="ROS maps: treat every cell that is not free as an obstacle (maps with grey walls).")
+    g.add_argument("--reference", type=Path, default=None, metavar="FILE",
+                   help="reference trajectory for report.png's error panel and summary.json: TUM or CSV "
+                        "time,x,y,theta, matched to the scans by time (default: the log's own reference poses). Example: --reference truth.tum")
     g.add_argument("--scans", type=_scan_slice, default=None, metavar="START:STOP[:STEP]",
                    help="use only these scans of the log (Python slice). Example: --scans 0:500 or --scans ::2")
     f = run.add_argument_group("filter")
@@ -596,6 +687,7 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
     settings = replace(settings, particles=resolve_particles(settings.particles, grid))
     check_memory(settings.particles, min(settings.beams, log.n_beams), settings.sensor,
                  n_cells=grid.data.size)  # before allocating
+    reference, reference_note = _reference(args, log)
     t_read = time.perf_counter() - t_start
     progress = Progress(len(log), stream=err, enabled=None if not args.quiet else False)
     is_bag = log.format in BAG_FORMATS
@@ -609,12 +701,24 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
     progress.close()
     write_trajectory(dest.path("trajectory.csv"), res, log.poses)
     outputs = _write_standard_outputs(dest.stage, res, log, err)
+    if inputs.build_map:  # the map the run used, for --map next time
+        from .io import write_ros_map
+
+        write_ros_map(dest.path("map.yaml"), grid)
+        outputs += ["map.yaml", "map.pgm"]
+    ref, ref_note = (reference if reference is not None else log.poses), reference_note
+    write_report(dest.path("report.png"), grid, res, ref,
+                 title=f"{Path(args.log).name}: {headline_short(res)}" + (f" (reference: {ref_note})" if ref_note
+                                                                          else ""))
+    outputs.append("report.png")
     summary = summarize(res, log, settings.particles, log.poses,
                         _settings_section(args, settings, log, map_desc, amcl, is_bag))
     if args.smooth:
         summary["settings"]["smooth"] = True
         summary["smooth"] = res.smooth.summary()
     summary["seconds_reading_files"] = round(t_read, 3)
+    if reference is not None:
+        summary["reference"] = _reference_section(args.reference, res, reference)
     if args.animate:
         t_anim = time.perf_counter()
         files = write_animation(dest.stage, grid, res, log.poses, n_particles=settings.particles)
@@ -632,6 +736,42 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
             print(f"removed {', '.join(p.name for p in removed)} of an earlier run from {args.out}", file=out)
         print(_report(summary, len(log), written, args.smooth), file=out)
     return 0
+
+
+def _reference(args, log) -> tuple[NDArray | None, str | None]:
+    """``--reference FILE`` matched to the log's scans (None without it), and how the report names it."""
+    if getattr(args, "reference", None) is None:
+        return None, ("the log's poses" if log.poses is not None else None)
+    from .pipeline import match_reference, read_reference
+
+    t, poses = read_reference(args.reference)
+    return match_reference(t, poses, log.times, where=f"--reference {args.reference}"), Path(args.reference).name
+
+
+def _reference_section(path: Path, res: RunResult, reference: NDArray) -> dict:
+    """``summary.json``'s ``reference`` section: the file, the scans it covers, the error while localized."""
+    err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
+    ok = np.isfinite(err)
+    loc = ok & (np.asarray(res.state) == "localized") if res.state is not None else ok
+    return {"file": str(path), "scans_matched": int(ok.sum()),
+            "median_error_m": round(float(np.median(err[ok])), 4),
+            "median_error_while_localized_m": round(float(np.median(err[loc])), 4) if loc.any() else None,
+            "final_error_m": None if not ok[-1] else round(float(err[-1]), 4)}
+
+
+def headline_short(res: RunResult) -> str:
+    """The report's title: the final state and the first localized scan.
+
+    >>> from types import SimpleNamespace
+    >>> headline_short(SimpleNamespace(state=np.array(["searching", "localized", "localized"])))
+    'localized from scan 1, final state localized'
+    """
+    state = np.asarray(res.state) if res.state is not None else None
+    if state is None:
+        return "no state"
+    loc = np.flatnonzero(state == "localized")
+    first = f"localized from scan {loc[0]}" if loc.size else "never localized"
+    return f"{first}, final state {state[-1]}"
 
 
 def _settings_section(args, settings: RunSettings, log, map_desc: str, amcl: dict | None, is_bag: bool) -> dict:
@@ -675,6 +815,10 @@ def _report(summary: dict, n_scans: int, written: list[Path], smooth: bool) -> s
         lines.append(f"against the log's reference poses, while localized: median error "
                      f"{summary['median_error_while_localized_m']} m, 90% {summary['p90_error_while_localized_m']} m"
                      f" ({summary['localized_scans_over_1m_off']} localized scans more than 1 m off)")
+    fp = summary.get("final_pose")
+    if fp:
+        lines.append(f"final pose: x {fp['x']:.2f} m, y {fp['y']:.2f} m, yaw {fp['theta']:.3f} rad "
+                     f"(std {fp['std'][0]:.2f} m, {fp['std'][1]:.2f} m, {fp['std'][2]:.3f} rad; {fp['state']})")
     lines.append(f"wrote {', '.join(str(p) for p in written)}")
     return "\n".join(lines)
 
@@ -705,10 +849,12 @@ def _cmd_demo(args, out: TextIO, err: TextIO) -> int:
     with RunOutput(args.out, results=(*DEMO_FILES, *RESULT_FILES), before_commit=add_score) as dest:
         dest.open()  # the lock first: a refused or interrupted demo leaves --out as it was
         d = make_demo(dest.stage, rng, steps=args.steps)
-        argv = ["run", "--map", str(d.map_path), "--log", str(d.log_path), "--out", str(args.out),
+        argv = ["run", "--map", str(d.map_path), "--log", str(d.log_path), "--reference", str(d.truth_path),
+                "--out", str(args.out),
                 "--particles", str(args.particles), "--seed", str(args.seed), "--frames", str(args.frames)]
         argv += ([] if args.no_animate else ["--animate"]) + (["--quiet"] if quiet else [])
-        shown = [str(args.out / Path(a).name) if a in (str(d.map_path), str(d.log_path)) else a for a in argv]
+        staged = (str(d.map_path), str(d.log_path), str(d.truth_path))
+        shown = [str(args.out / Path(a).name) if a in staged else a for a in argv]
         if not quiet:
             print(f"simulated {args.steps} scans of a robot in the built-in office (map with a moved cupboard, walls "
                   f"drawn at another resolution, unmapped clutter): {', '.join(DEMO_FILES)}", file=out)

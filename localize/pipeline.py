@@ -48,7 +48,8 @@ from .settings import DEFAULTS, LEGACY_NAMES, RunSettings
 
 __all__ = ["RunResult", "localize_log", "make_sensor", "check_log_odometry", "auto_particles", "resolve_particles",
            "converged_at", "kld_sampling", "augmented_filter", "settings_with", "read_log_file", "read_map_file",
-           "read_inputs", "Inputs", "check_free_space", "map_summary", "AUTO_PARTICLES", "ODOMETRY_SIGN"]
+           "read_inputs", "Inputs", "check_free_space", "map_summary", "AUTO_PARTICLES", "ODOMETRY_SIGN",
+           "read_reference", "match_reference"]
 
 
 # ============================================================================ particles
@@ -217,7 +218,9 @@ class RunResult:
     the other attributes are read from it: ``estimates`` (its ``poses``), ``spread`` (the position spread
     of *all* particles, ``hypot(std_x, std_y)``), ``n_eff``, ``updated``, ``seconds``, ``snapshots``,
     ``state`` (``searching``, ``localized`` or ``lost``, see :class:`localize.policies.StateRules`) and
-    ``covariances`` (``(K, 3, 3)``, the particles' variances on the diagonal, for the result bag).
+    ``covariances`` (``(K, 3, 3)``: the weighted covariance of the best cluster per scan, the trace's ``cov``;
+    for a trace without one, the variances of all particles on the diagonal). ``snapshots`` always hold
+    the last scan's particles (the report's final cloud).
     """
 
     times: NDArray[np.float64]
@@ -234,6 +237,9 @@ class RunResult:
 
     @property
     def covariances(self) -> NDArray[np.float64]:
+        cov = getattr(self.trace, "cov", None)
+        if cov is not None:
+            return np.asarray(cov, dtype=float)
         covs = np.zeros((len(self.trace), 3, 3))
         covs[:, [0, 1, 2], [0, 1, 2]] = self.trace.stds ** 2
         return covs
@@ -346,14 +352,17 @@ def localize_log(grid: OccupancyGrid, log, settings: RunSettings | None = None, 
                                 kld=kld_sampling(s, n_particles), unknown_allowed=s.unknown_allowed,
                                 unknown_penalty=s.unknown_penalty, min_ess=s.min_ess,
                                 occupied_penalty=s.occupied_penalty)
-    if not s.track:
+    if s.initial_pose is not None:  # a known start (--initial-pose, AMCL's initial_pose_*)
+        f = MCL.gaussian(np.asarray(s.initial_pose, dtype=float), tuple(s.initial_std), n_particles, motion, model,
+                         rng=rng, grid=grid, **opts)
+    elif not s.track:
         f = MCL.uniform(grid, n_particles, motion, model, rng=rng, **opts)
     else:
         if log.poses is None:
             raise ValueError("init='reference' (track) needs reference poses in the log (log.poses is None)")
         f = MCL.gaussian(log.poses[0], tuple(s.init_std), n_particles, motion, model, rng=rng, grid=grid, **opts)
     k_scans = len(log)
-    snap_steps: Sequence[int] = ()
+    snap_steps: Sequence[int] = [k_scans - 1]  # the last scan's cloud, always (the report's final particles)
     if snapshot_every:
         snap_steps = sorted(set(range(0, k_scans, snapshot_every)) | {k_scans - 1})
     odo = log.odometry
@@ -521,6 +530,119 @@ def read_inputs(inputs: Inputs, min_range: float | None = None, warn: Callable[[
         desc = str(inputs.map)
     check_free_space(grid, desc)
     return log, grid, desc
+
+
+def _read_reference_csv(p: Path) -> tuple[NDArray, NDArray]:
+    """``(times, poses)`` of a CSV file with columns time, x, y, theta (a header naming them, or none)."""
+    from .io._common import FormatError
+
+    rows, cols = [], None
+    for n, line in enumerate(p.read_text().splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        f = [v.strip() for v in s.split(",")]
+        if cols is None and not rows:
+            try:
+                float(f[0])
+            except ValueError:
+                names = [v.lower() for v in f]
+                missing = [c for c in ("time", "x", "y", "theta") if c not in names]
+                if missing:
+                    raise FormatError(p, n, f"the header names no column {', '.join(missing)}; expected "
+                                            "time,x,y,theta") from None
+                cols = [names.index(c) for c in ("time", "x", "y", "theta")]
+                continue
+        idx = cols or [0, 1, 2, 3]
+        if len(f) <= max(idx):
+            raise FormatError(p, n, f"expected time,x,y,theta; got {len(f)} field(s)")
+        try:
+            rows.append([float(f[i]) for i in idx])
+        except ValueError:
+            raise FormatError(p, n, f"expected numbers (time,x,y,theta); got {s[:60]!r}") from None
+        if not np.all(np.isfinite(rows[-1])):
+            raise FormatError(p, n, f"expected finite numbers; got {s[:60]!r}")
+    if not rows:
+        raise FormatError(p, None, "the file holds no poses (expected CSV time,x,y,theta or TUM)")
+    a = np.array(rows)
+    return a[:, 0], a[:, 1:4]
+
+
+def read_reference(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(times, poses)`` of a reference trajectory file: TUM, or CSV with columns time, x, y, theta.
+
+    The format is read from the content: lines of eight space-separated numbers
+    are TUM (:func:`localize.io.tum.read_tum`), comma-separated lines CSV (a
+    header naming ``time,x,y,theta`` is optional; a ``trajectory.csv`` of an
+    earlier run qualifies). Times must not decrease.
+
+    Examples
+    --------
+    >>> p = tmp_dir() / "ref.csv"
+    >>> _ = p.write_text("time,x,y,theta\\n0.0,1,2,0\\n1.0,2,2,0.5\\n")
+    >>> t, poses = read_reference(p)
+    >>> t.tolist(), poses[1].tolist()
+    ([0.0, 1.0], [2.0, 2.0, 0.5])
+    >>> _ = p.write_text("time,x,y\\n0.0,1,2\\n")
+    >>> read_reference(p)
+    Traceback (most recent call last):
+    ...
+    localize.io._common.FormatError: ...ref.csv:1: the header names no column theta; expected time,x,y,theta
+    """
+    from .io._common import FormatError
+    from .io.tum import read_tum
+
+    p = Path(path)
+    if not p.is_file():
+        raise FormatError(p, None, "no such file (--reference: a TUM file or a CSV with time,x,y,theta)")
+    first = next((ln.strip() for ln in p.read_text().splitlines() if ln.strip() and not ln.startswith("#")), "")
+    if "," not in first and len(first.split()) == 8:
+        t, poses = read_tum(p)
+    else:
+        t, poses = _read_reference_csv(p)
+    if np.any(np.diff(t) < 0):
+        k = int(np.flatnonzero(np.diff(t) < 0)[0])
+        raise FormatError(p, None, f"the times go back (pose {k + 2}: {t[k + 1]:g} after {t[k]:g}); sort the file")
+    return t, poses
+
+
+def match_reference(ref_times: ArrayLike, ref_poses: ArrayLike, times: ArrayLike, max_gap: float = 0.5,
+                    where: str = "the reference") -> NDArray[np.float64]:
+    """The reference pose at each of ``times``: interpolated between the two nearest reference poses.
+
+    A scan more than ``max_gap`` seconds from every reference pose gets NaN
+    (no reference there); headings are interpolated on the circle. Raises a
+    ValueError when no scan gets a reference (the files cover different times).
+
+    Examples
+    --------
+    >>> match_reference([0.0, 1.0], [[0, 0, 3.0], [1, 0, -2.9]], [0.5, 5.0]).round(3).tolist()
+    [[0.5, 0.0, -3.092], [nan, nan, nan]]
+    """
+    rt = np.asarray(ref_times, dtype=float)
+    rp = np.asarray(ref_poses, dtype=float).reshape(-1, 3)
+    t = np.asarray(times, dtype=float)
+    out = np.full((t.size, 3), np.nan)
+    j = np.clip(np.searchsorted(rt, t), 1, max(rt.size - 1, 1))
+    i = j - 1
+    if rt.size == 1:
+        i = j = np.zeros(t.size, dtype=int)
+    gap_i, gap_j = np.abs(t - rt[i]), np.abs(rt[j] - t)
+    span = rt[j] - rt[i]
+    inside = (t >= rt[i]) & (t <= rt[j]) & (span > 0) & (np.minimum(gap_i, gap_j) <= max_gap)
+    u = np.where(span > 0, (t - rt[i]) / np.where(span > 0, span, 1.0), 0.0)
+    dth = np.angle(np.exp(1j * (rp[j, 2] - rp[i, 2])))
+    interp = np.column_stack([rp[i, :2] + u[:, None] * (rp[j, :2] - rp[i, :2]),
+                              np.angle(np.exp(1j * (rp[i, 2] + u * dth)))])
+    out[inside] = interp[inside]
+    near = np.where(gap_i <= gap_j, i, j)
+    exact = ~inside & (np.abs(t - rt[near]) <= max_gap)
+    out[exact] = rp[near[exact]]
+    if not np.isfinite(out[:, 0]).any():
+        raise ValueError(f"{where}: its times ({rt[0]:g} to {rt[-1]:g} s) match none of the log's scans "
+                         f"({t[0]:g} to {t[-1]:g} s, within {max_gap:g} s); give a reference of this log, "
+                         "in the log's clock")
+    return out
 
 
 def map_summary(grid: OccupancyGrid) -> str:

@@ -42,6 +42,7 @@ from ._checks import (
     check_count,
     check_interval,
     check_nonnegative,
+    check_number,
     check_positive,
     check_probability,
 )
@@ -138,6 +139,10 @@ def _std3(value: Any, name: str) -> tuple[float, ...]:
     return _floats(value, name, 3, check_positive)
 
 
+def _pose3(value: Any, name: str) -> tuple[float, float, float]:
+    return _floats(value, name, 3, check_number)
+
+
 def _params(value: Any, name: str) -> dict:
     if not isinstance(value, Mapping):
         raise TypeError(f"{name} must be a dict of sensor model keyword arguments; got {type(value).__name__}")
@@ -168,7 +173,8 @@ class RunSettings:
     """Every setting of a log run once: default, unit, range and help in each field's metadata.
 
     The first 22 fields are the filter options of ``localize run`` (``--particles`` ...
-    ``--odometry-sign``, in the order of ``--help``), then ``track`` (``--track``);
+    ``--odometry-sign``, in the order of ``--help``), then ``track`` (``--track``), ``initial_pose`` and
+    ``initial_std`` (``--initial-pose``, ``--initial-std``);
     the rest are library settings without a flag, which an AMCL parameter file or
     an experiment may set. Values are checked (and lists made tuples) when the
     object is made; see :func:`describe` for one setting's meaning.
@@ -345,6 +351,14 @@ class RunSettings:
         valid="True or False", cli_help="""
         pose tracking instead of global localization: start around the log's first reference pose (needs a
         corrected log).""")
+    initial_pose: tuple[float, float, float] | None = setting(
+        None, "a known start: particles drawn around this pose (x, y in the map frame, yaw) instead of everywhere",
+        _optional(_pose3), unit="metres, metres, radians", valid="three numbers", metavar=("X", "Y", "YAW"), nargs=3,
+        cli_help="""start around this pose, map frame, metres and radians (default: none, global localization). Example: --initial-pose 2 3.5 1.57""")
+    initial_std: tuple[float, float, float] = setting(
+        (0.5, 0.5, 0.2618), "with initial_pose: standard deviations of the start's Gaussian (AMCL's defaults)",
+        _std3, unit="metres, metres, radians", valid="three numbers > 0", metavar=("SX", "SY", "SYAW"), nargs=3,
+        cli_help="""with --initial-pose: its standard deviations (default {default}, AMCL's initial_cov_*). Example: --initial-std 0.3 0.3 0.2""")
     # ---------------------------------------------------------------- library settings (no flag)
     init_std: tuple[float, float, float] = setting(
         (0.1, 0.1, 0.05), "with track: standard deviations of the prior around the first reference pose", _std3,
@@ -418,7 +432,7 @@ def setting_names(cli_only: bool = False) -> tuple[str, ...]:
     """The names of the settings (``cli_only``: those with a command-line flag).
 
     >>> setting_names(cli_only=True)[-3:]
-    ('occupied_penalty', 'odometry_sign', 'track')
+    ('track', 'initial_pose', 'initial_std')
     """
     return tuple(f.name for f in fields(RunSettings) if f.metadata["flag"] or not cli_only)
 
@@ -475,6 +489,10 @@ def _element_check(f: Any) -> Callable[[Any, str], Any]:
     """The check of one value of a setting that takes several on the command line."""
     if f.name == "alphas":
         return check_nonnegative
+    if f.name == "initial_pose":
+        return check_number
+    if f.name == "initial_std":
+        return check_positive
     return check_nonnegative if f.metadata["nargs"] else f.metadata["check"]
 
 
@@ -594,4 +612,10 @@ def with_amcl(settings: RunSettings, amcl: Mapping[str, Any], given: set[str] = 
     if aug is not None:
         ch.update(augmented=(aug.alpha_slow, aug.alpha_fast), augmented_temperature=aug.temperature)
     ch["resample_threshold"] = amcl["resample_threshold"]
+    if amcl.get("initial_pose") is not None:  # AMCL's initial_pose_* / initial_cov_*: a known start
+        for n in ("initial_pose", "initial_std"):
+            if n in given:
+                kept.append(n)
+            else:
+                ch[n] = amcl[n]
     return replace(settings, **ch), kept

@@ -94,8 +94,13 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     if last in getattr(trace, "snapshots", {}):
         parts, w = trace.snapshots[last]
         sub = slice(None) if len(parts) <= max_particles else np.linspace(0, len(parts) - 1, max_particles).astype(int)
+        n_all = getattr(trace, "n_particles", None)
+        n_all = int(n_all[last]) if n_all is not None and len(n_all) > last else len(parts)
+        shown = len(parts) if len(parts) <= max_particles else max_particles
+        label = (f"final particles ({n_all:,})" if shown >= n_all else
+                 f"final particles ({shown:,} of {n_all:,})")
         ax.scatter(parts[sub, 0], parts[sub, 1], s=2, color="tab:purple", alpha=0.35, linewidths=0,
-                   label=f"final particles ({len(parts):,})", zorder=2)
+                   label=label, zorder=2)
     if ref is not None:
         ax.plot(ref[:, 0], ref[:, 1], color="k", lw=1.0, alpha=0.6, label="reference", zorder=3)
     ax.plot(poses[:, 0], poses[:, 1], color="0.4", lw=0.6, alpha=0.7, zorder=3)
