@@ -79,11 +79,13 @@ from .pipeline import (  # noqa: F401
     augmented_filter,
     auto_particles,
     check_log_odometry,
+    check_map,
     converged_at,
     kld_sampling,
     localize_log,
     make_sensor,
     map_summary,
+    particles_for_area,
     read_inputs,
     read_log_file,
     resolve_particles,
@@ -684,6 +686,13 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
     """Read, filter (:mod:`localize.pipeline`), write the outputs into ``dest`` and report."""
     t_start = time.perf_counter()
     log, grid, map_desc = read_inputs(inputs, settings.min_range, warn=_warner(err))
+    map_check = check_map(grid, inputs.map)
+    for w in map_check.warnings:
+        _warner(err)(f"{map_desc}: {w}")
+    if settings.particles == "auto" and map_check.robot_m2 < map_check.free_m2:  # sized from where the robot can be
+        settings = replace(settings, particles=particles_for_area(map_check.robot_m2))
+        _warner(err)(f"--particles auto: {settings.particles} particles for the {map_check.robot_m2:.0f} m^2 the "
+                     "robot can be in (the initial cloud still covers all free cells)")
     settings = replace(settings, particles=resolve_particles(settings.particles, grid))
     check_memory(settings.particles, min(settings.beams, log.n_beams), settings.sensor,
                  n_cells=grid.data.size)  # before allocating
@@ -704,7 +713,9 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
     if inputs.build_map:  # the map the run used, for --map next time
         from .io import write_ros_map
 
-        write_ros_map(dest.path("map.yaml"), grid)
+        trinary = OccupancyGrid(np.where(grid.occupied, 1.0, np.where(grid.free, 0.0, np.nan)), grid.resolution,
+                                origin=tuple(grid.origin))  # the run's free / occupied / unknown, as --map reads them
+        write_ros_map(dest.path("map.yaml"), trinary)
         outputs += ["map.yaml", "map.pgm"]
     ref, ref_note = (reference if reference is not None else log.poses), reference_note
     write_report(dest.path("report.png"), grid, res, ref,
@@ -717,6 +728,9 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
         summary["settings"]["smooth"] = True
         summary["smooth"] = res.smooth.summary()
     summary["seconds_reading_files"] = round(t_read, 3)
+    summary["map_check"] = {"free_m2": round(map_check.free_m2, 1), "outside_m2": round(map_check.outside_m2, 1),
+                            "robot_m2": round(map_check.robot_m2, 1), "free_share": round(map_check.free_share, 3),
+                            "thresholds": map_check.thresholds, "warnings": list(map_check.warnings)}
     if reference is not None:
         summary["reference"] = _reference_section(args.reference, res, reference)
     if args.animate:

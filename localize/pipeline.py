@@ -49,7 +49,7 @@ from .settings import DEFAULTS, LEGACY_NAMES, RunSettings
 __all__ = ["RunResult", "localize_log", "make_sensor", "check_log_odometry", "auto_particles", "resolve_particles",
            "converged_at", "kld_sampling", "augmented_filter", "settings_with", "read_log_file", "read_map_file",
            "read_inputs", "Inputs", "check_free_space", "map_summary", "AUTO_PARTICLES", "ODOMETRY_SIGN",
-           "read_reference", "match_reference"]
+           "read_reference", "match_reference", "MapCheck", "check_map", "particles_for_area"]
 
 
 # ============================================================================ particles
@@ -643,6 +643,112 @@ def match_reference(ref_times: ArrayLike, ref_poses: ArrayLike, times: ArrayLike
                          f"({t[0]:g} to {t[-1]:g} s, within {max_gap:g} s); give a reference of this log, "
                          "in the log's clock")
     return out
+
+
+@dataclass(frozen=True)
+class MapCheck:
+    """What :func:`check_map` found: the free area, where it lies, what the thresholds did; ``warnings`` (text).
+
+    ``free_m2`` is the map's free area, ``outside_m2`` the part of it connected
+    to the map's edge (a building drawn with walls all round has none: free
+    space reaching the edge is the outside, or a map cut off), ``robot_m2``
+    the area the robot can be in (``free_m2``, less ``outside_m2`` when the
+    outside reads as free), ``free_share`` the free share of the map's cells.
+    """
+
+    free_m2: float
+    outside_m2: float
+    robot_m2: float
+    free_share: float
+    warnings: tuple[str, ...] = ()
+    thresholds: str | None = None
+
+
+def particles_for_area(area_m2: float) -> int:
+    """``--particles auto`` for ``area_m2`` of free space: one per 0.5 m x 0.5 m x 10 degree bin, within
+    :data:`AUTO_PARTICLES` (as :func:`auto_particles` does for a whole map).
+
+    >>> particles_for_area(204.0), particles_for_area(1.0)
+    (29376, 20000)
+    """
+    lo, hi = AUTO_PARTICLES
+    return int(min(max(round(area_m2 / 0.25 * 36), lo), hi))
+
+
+def _ros_thresholds(path: Path | None) -> tuple[str, float, int] | None:
+    """For a map_server map whose free_thresh makes map_saver's unknown grey (205) free: what that did, the
+    grey's share of the image, and the number of pixels free under map_server's default free_thresh 0.196."""
+    from .io import read_pgm
+    from .io.ros import parse_map_yaml
+
+    if path is None or Path(path).suffix.lower() not in (".yaml", ".yml"):
+        return None
+    try:
+        y = parse_map_yaml(path)
+        img_name = str(y["image"][0])
+        img = read_pgm((Path(path).parent / img_name) if not Path(img_name).is_absolute() else img_name)
+    except (ValueError, KeyError, OSError):
+        return None
+    free_t = float(y.get("free_thresh", (0.196, 0))[0])
+    negate = bool(y.get("negate", (0, 0))[0])
+    grey = 205
+    occ = (img / 255.0) if negate else (255.0 - img) / 255.0
+    p = grey / 255 if negate else (255 - grey) / 255
+    if p >= free_t or img.ndim != 2:
+        return None
+    share = float(np.mean(img == grey))
+    return (f"free_thresh {free_t:g} makes map_saver's 'unknown' grey ({grey}, occupancy {p:.3f}) free: "
+            f"{share:.0%} of the image is that grey", share, int(np.sum(occ < 0.196)))
+
+
+def check_map(grid: OccupancyGrid, map_path: Path | None = None) -> MapCheck:
+    """Check that the map's free space is plausible for a robot's laser; warn (text) when it is not.
+
+    Two signs of a map whose unknown reads as free: for a ROS map, a
+    ``free_thresh`` above map_saver's unknown grey 205 (occupancy 0.196) with
+    more than 5% of the image that grey (the grey then counts as free); for
+    any map, more than half of the cells free *and* more than a quarter of
+    the free area connected to the map's edge (the outside of the building:
+    a floor drawn with walls all round has none). ``robot_m2``, the area the
+    robot can be in, leaves out what a flagged map reads as free wrongly (the
+    grey; the free space reaching the edge); the command line sizes
+    ``--particles auto`` from it. (A map cropped inside a building, like the
+    Willow Garage map, reaches its edge too, but is not mostly free.)
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> check_map(office()).warnings
+    ()
+    >>> open_field = OccupancyGrid(np.zeros((100, 100)), 0.1)          # everything free, to the edge
+    >>> c = check_map(open_field)
+    >>> c.free_share, c.outside_m2, len(c.warnings)
+    (1.0, 100.0, 1)
+    """
+    from scipy import ndimage
+
+    free = np.asarray(grid.free)
+    cell = float(grid.resolution) ** 2
+    free_m2 = float(free.sum()) * cell
+    labels, _ = ndimage.label(free)
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    edge = edge[edge > 0]
+    outside_m2 = float(np.isin(labels, edge).sum()) * cell if edge.size else 0.0
+    share = float(free.mean()) if free.size else 0.0
+    warns, robot_m2 = [], free_m2
+    ros = _ros_thresholds(map_path)
+    if ros is not None and ros[1] > 0.05:
+        robot_m2 = min(robot_m2, ros[2] * cell) if ros[2] > 0 else robot_m2
+        warns.append(f"{ros[0]}, {share:.0%} of the map's cells read free ({free_m2:.0f} m^2; {ros[2] * cell:.0f} "
+                     "m^2 with map_server's default free_thresh 0.196); set free_thresh: 0.196 in the YAML, or "
+                     "--not-free-is-occupied")
+    if share > 0.5 and outside_m2 > 0.25 * free_m2:
+        robot_m2 = min(robot_m2, free_m2 - outside_m2) if free_m2 > outside_m2 else robot_m2
+        warns.append(f"{share:.0%} of the map's cells are free and {outside_m2:.0f} m^2 of the {free_m2:.0f} m^2 "
+                     "of free space reach the map's edge: the outside of the building reads as free (is the "
+                     "unknown read as free?)")
+    return MapCheck(free_m2=free_m2, outside_m2=outside_m2, robot_m2=robot_m2, free_share=share,
+                    warnings=tuple(warns), thresholds=None if ros is None else ros[0])
 
 
 def map_summary(grid: OccupancyGrid) -> str:
