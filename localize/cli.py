@@ -686,7 +686,7 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
     """Read, filter (:mod:`localize.pipeline`), write the outputs into ``dest`` and report."""
     t_start = time.perf_counter()
     log, grid, map_desc = read_inputs(inputs, settings.min_range, warn=_warner(err))
-    map_check = check_map(grid, inputs.map)
+    map_check = check_map(grid, inputs.map, log, max_range=settings.max_range)
     for w in map_check.warnings:
         _warner(err)(f"{map_desc}: {w}")
     if settings.particles == "auto" and map_check.robot_m2 < map_check.free_m2:  # sized from where the robot can be
@@ -730,6 +730,7 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
     summary["seconds_reading_files"] = round(t_read, 3)
     summary["map_check"] = {"free_m2": round(map_check.free_m2, 1), "outside_m2": round(map_check.outside_m2, 1),
                             "robot_m2": round(map_check.robot_m2, 1), "free_share": round(map_check.free_share, 3),
+                            "scanned_m2": None if map_check.scanned_m2 is None else round(map_check.scanned_m2, 1),
                             "thresholds": map_check.thresholds, "warnings": list(map_check.warnings)}
     if reference is not None:
         summary["reference"] = _reference_section(args.reference, res, reference)

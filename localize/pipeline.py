@@ -49,7 +49,7 @@ from .settings import DEFAULTS, LEGACY_NAMES, RunSettings
 __all__ = ["RunResult", "localize_log", "make_sensor", "check_log_odometry", "auto_particles", "resolve_particles",
            "converged_at", "kld_sampling", "augmented_filter", "settings_with", "read_log_file", "read_map_file",
            "read_inputs", "Inputs", "check_free_space", "map_summary", "AUTO_PARTICLES", "ODOMETRY_SIGN",
-           "read_reference", "match_reference", "MapCheck", "check_map", "particles_for_area"]
+           "read_reference", "match_reference", "MapCheck", "check_map", "particles_for_area", "scanned_area"]
 
 
 # ============================================================================ particles
@@ -652,8 +652,9 @@ class MapCheck:
     ``free_m2`` is the map's free area, ``outside_m2`` the part of it connected
     to the map's edge (a building drawn with walls all round has none: free
     space reaching the edge is the outside, or a map cut off), ``robot_m2``
-    the area the robot can be in (``free_m2``, less ``outside_m2`` when the
-    outside reads as free), ``free_share`` the free share of the map's cells.
+    the area the robot can be in (``free_m2``, less what a flagged map reads as
+    free wrongly), ``free_share`` the free share of the map's cells,
+    ``scanned_m2`` the area the scans cover (with a log).
     """
 
     free_m2: float
@@ -662,6 +663,7 @@ class MapCheck:
     free_share: float
     warnings: tuple[str, ...] = ()
     thresholds: str | None = None
+    scanned_m2: float | None = None
 
 
 def particles_for_area(area_m2: float) -> int:
@@ -701,7 +703,46 @@ def _ros_thresholds(path: Path | None) -> tuple[str, float, int] | None:
             f"{share:.0%} of the image is that grey", share, int(np.sum(occ < 0.196)))
 
 
-def check_map(grid: OccupancyGrid, map_path: Path | None = None) -> MapCheck:
+def scanned_area(log, cell: float = 0.25, max_scans: int = 400, max_range: float | None = None) -> float:
+    """The area (m^2) the log's scans cover: the union of the scans' polygons (end points clipped to
+    ``max_range``, "no return" beams at it) placed at the log's reference poses, else its odometry, rasterised
+    at ``cell`` metres; at most ``max_scans`` evenly spread scans. Odometry drift smears the union, so the
+    area is if anything too large.
+
+    Examples
+    --------
+    >>> from localize.io import LaserLog
+    >>> ang = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    >>> log = LaserLog(times=[0.0], odometry=[[0.0, 0.0, 0.0]], ranges=np.full((1, 360), 2.0), angles=ang,
+    ...                max_range=10.0)
+    >>> a = scanned_area(log, cell=0.05)         # a disc of radius 2 m: 12.57 m^2, plus the boundary cells
+    >>> bool(np.pi * 4 < a < np.pi * 2.05 ** 2)
+    True
+    """
+    from PIL import Image, ImageDraw
+
+    poses = np.asarray(log.poses if log.poses is not None else log.odometry, dtype=float)
+    mr = float(log.max_range if max_range is None else min(max_range, log.max_range))
+    idx = np.unique(np.linspace(0, len(poses) - 1, min(len(poses), max_scans)).astype(int))
+    r = np.minimum(np.nan_to_num(np.asarray(log.ranges, dtype=float)[idx], nan=mr, posinf=mr), mr)
+    a = np.asarray(log.angles, dtype=float)
+    ang = poses[idx, 2:3] + a[None, :]
+    xs = poses[idx, 0:1] + r * np.cos(ang)
+    ys = poses[idx, 1:2] + r * np.sin(ang)
+    x0, y0 = min(xs.min(), poses[idx, 0].min()), min(ys.min(), poses[idx, 1].min())
+    w = int(np.ceil((max(xs.max(), poses[idx, 0].max()) - x0) / cell)) + 2
+    h = int(np.ceil((max(ys.max(), poses[idx, 1].max()) - y0) / cell)) + 2
+    img = Image.new("1", (w, h), 0)
+    draw = ImageDraw.Draw(img)
+    for k in range(len(idx)):
+        px = np.r_[poses[idx[k], 0], xs[k]]
+        py = np.r_[poses[idx[k], 1], ys[k]]
+        draw.polygon(list(zip(((px - x0) / cell).tolist(), ((py - y0) / cell).tolist())), fill=1)
+    return float(np.asarray(img).sum()) * cell * cell
+
+
+def check_map(grid: OccupancyGrid, map_path: Path | None = None, log=None,
+              max_range: float | None = None) -> MapCheck:
     """Check that the map's free space is plausible for a robot's laser; warn (text) when it is not.
 
     Two signs of a map whose unknown reads as free: for a ROS map, a
@@ -709,7 +750,10 @@ def check_map(grid: OccupancyGrid, map_path: Path | None = None) -> MapCheck:
     more than 5% of the image that grey (the grey then counts as free); for
     any map, more than half of the cells free *and* more than a quarter of
     the free area connected to the map's edge (the outside of the building:
-    a floor drawn with walls all round has none). ``robot_m2``, the area the
+    a floor drawn with walls all round has none). With a ``log``, a third
+    sign, reported but not acted on: free space more than 5 times the area the
+    scans cover (:func:`scanned_area`; a log that visits part of a building
+    also gives it). ``robot_m2``, the area the
     robot can be in, leaves out what a flagged map reads as free wrongly (the
     grey; the free space reaching the edge); the command line sizes
     ``--particles auto`` from it. (A map cropped inside a building, like the
@@ -747,8 +791,15 @@ def check_map(grid: OccupancyGrid, map_path: Path | None = None) -> MapCheck:
         warns.append(f"{share:.0%} of the map's cells are free and {outside_m2:.0f} m^2 of the {free_m2:.0f} m^2 "
                      "of free space reach the map's edge: the outside of the building reads as free (is the "
                      "unknown read as free?)")
+    seen = None
+    if log is not None and len(log):
+        seen = scanned_area(log, max_range=max_range)
+        if free_m2 > 5 * seen:
+            warns.append(f"the map has {free_m2:.0f} m^2 of free space, {free_m2 / max(seen, 1e-9):.0f} times the "
+                         f"{seen:.0f} m^2 the scans cover: the particles search all of it (a log of part of the "
+                         "building; else check the map's thresholds)")
     return MapCheck(free_m2=free_m2, outside_m2=outside_m2, robot_m2=robot_m2, free_share=share,
-                    warnings=tuple(warns), thresholds=None if ros is None else ros[0])
+                    warnings=tuple(warns), thresholds=None if ros is None else ros[0], scanned_m2=seen)
 
 
 def map_summary(grid: OccupancyGrid) -> str:

@@ -4,6 +4,7 @@ the --help a newcomer reads, the hints when a run ends lost."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io as stdio
 import json
 
@@ -229,3 +230,15 @@ def test_bad_reference_files_are_clear_errors(tmp_path, demo, text, message):
     status, _, err = run_cli("run", "--map", demo.map_path, "--log", demo.log_path, "--reference", ref,
                              "--scans", "0:3", "--particles", 200, "--out", tmp_path / "o")
     assert status == 2 and message in err and "Traceback" not in err
+
+
+def test_map_warning_when_free_space_far_exceeds_what_the_scans_cover(demo):
+    """The demo's office (204 m^2 free) against one scan of a laser that sees 1 m: the scans cover far less;
+    against the whole demo log they do not."""
+    grid, log = io.read_map(demo.map_path), io.read_log(demo.log_path)
+    few = log.select(slice(0, 1))
+    c = check_map(grid, None, log)
+    assert c.scanned_m2 > 20 and not any("scans cover" in w for w in c.warnings)
+    short = dataclasses.replace(few, ranges=np.minimum(few.ranges, 1.0))   # a laser that sees 1 m
+    c = check_map(grid, None, short)
+    assert c.scanned_m2 < 204 / 5 and any("times the" in w for w in c.warnings)
