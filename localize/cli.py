@@ -120,6 +120,18 @@ examples:
 """
 
 
+RUN_EXAMPLES = """\
+examples:
+  # a CARMEN log with corrected poses: build the map from them, localize
+  localize run --log intel-corrected.log.gz --build-map --out out/intel
+  # your robot: a ROS 2 bag folder, its map_server map, its AMCL parameters
+  localize run --map office.yaml --log office_run/ --amcl-params nav2.yaml
+  # a known start (x y yaw), and a reference trajectory to compare with
+  localize run --map office.yaml --log office_run/ --initial-pose 2 3.5 1.57 \\
+               --reference gt.tum
+"""
+
+
 # ============================================================================ settings
 #: The defaults of ``localize run``: :data:`localize.settings.DEFAULTS` (see its --help and chapter 9 for the
 #: reasons behind each).
@@ -181,7 +193,7 @@ def pose_covariances(res: RunResult) -> NDArray:
     --------
     >>> from types import SimpleNamespace
     >>> c = np.repeat(np.eye(3)[None] * 0.04, 2, axis=0)
-    >>> pose_covariances(SimpleNamespace(covariances=c, smooth=None))[0, 0, 0]
+    >>> float(pose_covariances(SimpleNamespace(covariances=c, smooth=None))[0, 0, 0])
     0.04
     """
     sm = getattr(res, "smooth", None)
@@ -246,6 +258,9 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
         "final_estimate": [round(float(v), 4) for v in res.estimates[-1]],
         "final_pose": final_pose(res),
     }
+    if res.trace is not None and getattr(res.trace, "n_valid", None) is not None:
+        out["valid_readings_median"] = float(np.median(res.trace.n_valid))
+        out["beams_used"] = int(min(settings.get("beams") or log.n_beams, log.n_beams))
     if not reliable:
         out["real_time_factor_note"] = "the log's time stamps are not usable (too coarse or out of order)"
     if res.trace is not None:
@@ -360,6 +375,41 @@ def headline(summary: dict) -> str:
     return "; ".join(parts)
 
 
+def advice(summary: dict) -> list[str]:
+    """What to try when a run ends lost or searching, from the evidence in ``summary`` (empty otherwise).
+
+    * few valid readings per scan (median below a third of the beams used):
+      the range limits, ``--max-range`` / ``--min-range``;
+    * never localized: ``--particles`` (more of the pose space covered), and
+      the map (does the report's map match the scans?);
+    * lost after a stretch localized: ``--restart-after`` / ``--recovery-injection``.
+
+    Examples
+    --------
+    >>> s = {"particles": 20000, "valid_readings_median": 3, "beams_used": 30,
+    ...      "state": {"final_state": "searching", "first_localized_scan": None, "lost_intervals": []}}
+    >>> for line in advice(s): print(line[:60])
+    try --max-range / --min-range: a scan has 3 valid readings o
+    try --particles 40000: never localized with 20000 particles;
+    """
+    st = summary.get("state") or {}
+    if st.get("final_state", "localized") == "localized":
+        return []
+    out = []
+    valid, beams = summary.get("valid_readings_median"), summary.get("beams_used")
+    if valid is not None and beams and valid < beams / 3:
+        out.append(f"try --max-range / --min-range: a scan has {valid:g} valid readings of {beams} beams (median); "
+                   "readings beyond --max-range or at most --min-range are not evidence")
+    n = summary.get("particles", 0)
+    if st.get("first_localized_scan") is None:
+        out.append(f"try --particles {2 * n}: never localized with {n} particles; more cover more of the map's "
+                   "poses (and check in report.png that the map fits the scans)")
+    elif st.get("final_state") == "lost":
+        out.append("try --restart-after 3 or --recovery-injection 0.05: localized for a stretch, then lost to the "
+                   "end; a sooner restart or random particles while lost search the map again")
+    return out
+
+
 def write_animation(out_dir: Path, grid: OccupancyGrid, res: RunResult, reference: NDArray | None,
                     fps: int = 8, n_particles: int | None = None) -> list[Path]:
     """Save the particle snapshots as ``particles.gif`` (Pillow) and ``particles.mp4`` (if ffmpeg exists).
@@ -418,6 +468,13 @@ _particles = _settings.argparse_type(_settings.check_particles, "particles")
 _positive_float = _settings.argparse_type(lambda v, name: check_positive(v, name, "metres"), "positive_float")
 
 
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """``--help``: the description and examples as written, each option's line after a 28-column name."""
+
+    def __init__(self, prog: str) -> None:
+        super().__init__(prog, max_help_position=28)
+
+
 def _wrap(text: str, width: int = 79) -> str:
     """Wrap a help paragraph (the parsers use RawDescriptionHelpFormatter to keep the examples' layout)."""
     return textwrap.fill(" ".join(text.split()), width=width)
@@ -439,14 +496,14 @@ def _scan_slice(s: str) -> slice:
 def _add_resolution(parser: Any, what: str) -> None:
     """``--resolution``: the cell size of the map that ``run --build-map`` and ``map`` build from a log."""
     parser.add_argument("--resolution", type=_positive_float, default=0.05, metavar="M",
-                        help=f"cell size of {what}, metres (default 0.05). Example: --resolution 0.1")
+                        help=f"{what}'s cell size, m (default 0.05)")
 
 
 def _add_frames_and_quiet(parser: Any, frames: int) -> None:
     """``--frames`` and ``--quiet``: the options of ``run`` that ``demo`` passes on to it."""
     parser.add_argument("--frames", type=_positive_int, default=frames, metavar="K",
-                        help=f"number of animation frames (default {frames}). Example: --frames {2 * frames}")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal.")
+                        help=f"animation frames (default {frames})")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar, no summary (default off)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -462,75 +519,53 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser(
         "run", help="global localization with MCL on a log",
-        description=_wrap("Global localization with Monte Carlo Localization: particles start uniform over the "
-                          "map's free space and are moved by the log's odometry and weighted by its laser scans. "
-                          "Writes DIR/trajectory.csv (time,x,y,theta per scan, map frame, metres and radians, and the "
-                          "filter's state: searching, localized or lost), "
-                          "DIR/summary.json, DIR/trajectory.tum (for evo) and, with --animate, DIR/particles.gif; "
-                          "for a ROS bag also DIR/localization.bag (ROS 1) or DIR/localization_bag/ (ROS 2) with "
-                          "/amcl_pose and the particle cloud. The results appear together "
-                          "when the run is complete (an interrupted run leaves DIR as it was), results of an "
-                          "earlier run that this one does not produce are removed, and two runs cannot write "
-                          "one DIR at the same time."),
-        epilog=EXAMPLES + "\nAMCL parameters (--amcl-params FILE.yaml), ROS 1 amcl or nav2 nav2_amcl:\n" + _amcl_table(),
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+        usage="localize run --log FILE (--map FILE | --build-map) [--out DIR] [options]",
+        description=_wrap("Monte Carlo Localization on a log: particles start over the map's free space (or "
+                          "around --initial-pose), move with the odometry and are weighted by the laser scans. "
+                          "Writes DIR/trajectory.csv (pose, state, covariance per scan), DIR/report.png, "
+                          "DIR/summary.json and DIR/trajectory.tum; all together when the run is complete."),
+        epilog=RUN_EXAMPLES + "\nAMCL parameters (--amcl-params FILE.yaml), ROS 1 amcl or nav2 nav2_amcl:\n"
+        + _amcl_table() + "\n\nEach setting's rationale: localize.settings.explain(NAME), and chapter 9.",
+        formatter_class=_HelpFormatter)
     g = run.add_argument_group("input")
-    g.add_argument("--map", type=Path, metavar="FILE",
-                   help="the map: a CMU 16-831 map (wean.dat) or a ROS map_server YAML. "
-                        "Example: --map wean.dat")
     g.add_argument("--log", type=Path, metavar="FILE", required=True,
-                   help="the log: CMU 16-831 (O/L records, cm), CARMEN (FLASER/ODOM ..., may be gzipped), a ROS 1 "
-                        "bag or a ROS 2 bag folder (sqlite3 or MCAP; needs pip install \"localize[ros]\"). "
-                        "Example: --log robotdata1.log or --log robot.bag")
-    g.add_argument("--map-format", choices=["cmu", "ros"], default=None,
-                   help="override the map format detected from the file's content. Example: --map-format ros")
-    g.add_argument("--log-format", choices=["cmu", "carmen", "rosbag"], default=None,
-                   help="override the log format detected from the file's content. Example: --log-format carmen")
-    g.add_argument("--scan-topic", metavar="TOPIC", default=None,
-                   help="ROS bags: the sensor_msgs/LaserScan topic (needed when the bag has several). "
-                        "Example: --scan-topic /front/scan")
-    g.add_argument("--odom-topic", metavar="TOPIC", default=None,
-                   help="ROS bags: the nav_msgs/Odometry topic (default: the bag's one, else the odom -> base "
-                        "transform on /tf; --odom-topic /tf forces the latter). Example: --odom-topic /wheel/odom")
-    g.add_argument("--laser-pose", type=float, nargs=3, default=None, metavar=("X", "Y", "YAW"),
-                   help="the laser's mounting pose in the robot frame, metres and radians; overrides the log's "
-                        "(a bag's /tf_static, CMU's 25 cm ahead). Needed for a bag without /tf_static. "
-                        "Example: --laser-pose 0.2 0 0")
-    g.add_argument("--amcl-params", type=Path, default=None, metavar="FILE.yaml",
-                   help="take the filter settings from a ROS 1 amcl or nav2 AMCL parameter file (the mapping is "
-                        "printed; options given on the command line win). Example: --amcl-params nav2_params.yaml")
+                   help="CMU, CARMEN, ROS bag or bag folder (required)")
+    g.add_argument("--map", type=Path, metavar="FILE",
+                   help="CMU map or map_server YAML (default none)")
     g.add_argument("--build-map", action="store_true",
-                   help="instead of --map, build the map from the log's reference (corrected) poses, as CARMEN "
-                        "corrected logs carry them. Example: --build-map --resolution 0.05")
-    _add_resolution(g, "a map built with --build-map")
-    g.add_argument("--not-free-is-occupied", action="store_true",
-                   help="ROS maps: treat every cell that is not free as an obstacle (maps with grey walls).")
+                   help="map from the log's poses, saved (default off)")
+    _add_resolution(g, "the map")
+    g.add_argument("--amcl-params", type=Path, default=None, metavar="FILE",
+                   help="settings from an amcl / nav2 YAML (default none)")
     g.add_argument("--reference", type=Path, default=None, metavar="FILE",
-                   help="reference trajectory for report.png's error panel and summary.json: TUM or CSV "
-                        "time,x,y,theta, matched to the scans by time (default: the log's own reference poses). Example: --reference truth.tum")
-    g.add_argument("--scans", type=_scan_slice, default=None, metavar="START:STOP[:STEP]",
-                   help="use only these scans of the log (Python slice). Example: --scans 0:500 or --scans ::2")
-    f = run.add_argument_group("filter")
-    f.add_argument("--seed", type=_seed, default=0, metavar="S",
-                   help="seed of the random generator, a whole number >= 0: the same seed gives the same run "
-                        "(default 0). "
-                        "Example: --seed 7")
-    _settings.add_arguments(f)  # one option per setting of localize.settings.RunSettings
-    f.add_argument("--smooth", action="store_true",
-                   help="offline: filter the recorded log forwards and again backwards in time (the same settings, "
-                        "the log reversed), and combine the two passes scan by scan. The backward pass localizes "
-                        "the start that the forward pass spent searching; where both are localized but disagree "
-                        "(a look-alike corridor), the pass whose estimates fit the scans better wins, and a tie "
-                        "is reported as not localized. trajectory.csv gets the columns passes (both, disagree, "
-                        "forward, backward, none: which passes are localized at the scan and whether they agree) "
-                        "and source; summary.json a 'smooth' section. Takes twice as long (see localize.smooth). "
-                        "Example: --smooth")
+                   help="TUM or CSV time,x,y,theta (default: the log's)")
+    g.add_argument("--scans", type=_scan_slice, default=None, metavar="A:B[:S]",
+                   help="only these scans, a Python slice (default all)")
+    g.add_argument("--laser-pose", type=float, nargs=3, default=None, metavar=("X", "Y", "YAW"),
+                   help="laser's pose on the robot (default: the log's)")
+    g.add_argument("--scan-topic", metavar="TOPIC", default=None,
+                   help="bags: LaserScan topic (default: the only one)")
+    g.add_argument("--odom-topic", metavar="TOPIC", default=None,
+                   help="bags: Odometry topic or /tf (default: found)")
+    g.add_argument("--map-format", choices=["cmu", "ros"], default=None, metavar="FMT",
+                   help="map format: cmu, ros (default: detected)")
+    g.add_argument("--log-format", choices=["cmu", "carmen", "rosbag"], default=None, metavar="FMT",
+                   help="cmu, carmen, rosbag (default: detected)")
+    g.add_argument("--not-free-is-occupied", action="store_true",
+                   help="ROS maps: grey is wall, not unknown (default off)")
+    groups = {"sensor": run.add_argument_group("sensor"), "filter": run.add_argument_group("filter")}
+    groups["recovery"] = run.add_argument_group(
+        "recovery", "when the filter is wrong; the default --restart-after 5 suffices so far")
+    _settings.add_arguments(run, groups)  # one option per setting of localize.settings.RunSettings
+    groups["filter"].add_argument("--seed", type=_seed, default=0, metavar="S",
+                                  help="random seed: same seed, same run (default 0)")
+    groups["filter"].add_argument("--smooth", action="store_true",
+                                  help="offline: filter forwards and back (default off)")
     o = run.add_argument_group("output")
     o.add_argument("--out", type=Path, default=Path("localize-out"), metavar="DIR",
-                   help="output folder, created if needed and checked before the run starts; it holds one "
-                        "complete run's results or none (default ./localize-out). Example: --out out/wean")
+                   help="output folder (default ./localize-out)")
     o.add_argument("--animate", action="store_true",
-                   help="also write DIR/particles.gif (and particles.mp4 when ffmpeg is installed).")
+                   help="also DIR/particles.gif and .mp4 (default off)")
     _add_frames_and_quiet(o, frames=100)
 
     mp = sub.add_parser(
@@ -830,6 +865,7 @@ def _report(summary: dict, n_scans: int, written: list[Path], smooth: bool) -> s
         lines.append(f"against the log's reference poses, while localized: median error "
                      f"{summary['median_error_while_localized_m']} m, 90% {summary['p90_error_while_localized_m']} m"
                      f" ({summary['localized_scans_over_1m_off']} localized scans more than 1 m off)")
+    lines += advice(summary)
     fp = summary.get("final_pose")
     if fp:
         lines.append(f"final pose: x {fp['x']:.2f} m, y {fp['y']:.2f} m, yaw {fp['theta']:.3f} rad "

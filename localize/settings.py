@@ -47,7 +47,7 @@ from ._checks import (
     check_probability,
 )
 
-__all__ = ["RunSettings", "DEFAULTS", "LEGACY_NAMES", "describe", "add_arguments", "from_namespace", "parse_options",
+__all__ = ["RunSettings", "DEFAULTS", "LEGACY_NAMES", "describe", "explain", "CLI_GROUPS", "add_arguments", "from_namespace", "parse_options",
            "given_options",
            "with_amcl", "setting_names", "argparse_type", "check_particles", "jsonable"]
 
@@ -154,7 +154,8 @@ def setting(default: Any, help: str, check: Callable[[Any, str], Any], *, unit: 
             aliases: tuple[str, ...] = (), cli_help: str | None = None) -> Any:
     """A :class:`RunSettings` field: default, one-line ``help``, ``check`` (a :mod:`localize._checks` helper),
     ``unit``, ``valid`` range (words), and how the command line shows it (``flag`` False: library only;
-    ``cli_help``: the ``--help`` paragraph, ``{default}`` replaced by the default).
+    ``cli_help``: the setting's longer explanation and rationale, ``{default}`` replaced by the default,
+    read by :func:`explain`; ``--help`` shows the one line of :data:`CLI_GROUPS` instead).
 
     >>> f = setting(0.5, "a threshold", check_probability, valid="[0, 1]")
     >>> f.default, f.metadata["valid"], f.metadata["flag"]
@@ -496,31 +497,94 @@ def _element_check(f: Any) -> Callable[[Any, str], Any]:
     return check_nonnegative if f.metadata["nargs"] else f.metadata["check"]
 
 
-def add_arguments(parser: Any) -> None:
-    """Add one option per setting with a flag to ``parser`` (an argparse parser or argument group).
+#: The ``localize run --help`` line of each setting with a flag: its group and its one-line meaning (the
+#: default is appended). The rationale behind each is :func:`explain`'s (and chapter 9's).
+CLI_GROUPS: dict[str, tuple[str, str]] = {
+    "particles": ("filter", "start cloud; auto: by free area"),
+    "sensor": ("sensor", "likelihood or beam"),
+    "beams": ("sensor", "beams used per scan"),
+    "max_range": ("sensor", "longest usable reading, m"),
+    "alphas": ("filter", "odometry noise"),
+    "sigma_hit": ("sensor", "reading's spread about the map, m"),
+    "z_short": ("sensor", "weight of short (unmapped) readings"),
+    "temper": ("sensor", "factor on a scan's log-likelihood"),
+    "min_motion": ("filter", "update after M m or RAD turned"),
+    "injection": ("recovery", "random particles per resampling"),
+    "min_range": ("sensor", "readings up to M m are ignored"),
+    "kld": ("filter", "KLD-sampling bound (0: fixed count)"),
+    "min_particles": ("filter", "with --kld: never fewer particles"),
+    "augmented": ("recovery", "augmented MCL rates (0 0: off)"),
+    "recovery_injection": ("recovery", "while lost: random particles"),
+    "restart_after": ("recovery", "search again after K misfits (0: no)"),
+    "min_ess": ("filter", "keep F*N effective particles (0: off)"),
+    "expand": ("recovery", "spread the cloud on misfit"),
+    "unknown_beams": ("sensor", "unknown-cell beams: skip, score"),
+    "skip_short_beams": ("sensor", "skip beams M m short of the map"),
+    "occupied_penalty": ("sensor", "penalty of a particle in a wall"),
+    "odometry_sign": ("filter", "find reversing: auto, check, trust"),
+    "track": ("filter", "start at the log's first true pose"),
+    "initial_pose": ("filter", "start around this pose, m and rad"),
+    "initial_std": ("filter", "--initial-pose's spread"),
+}
+
+
+def explain(name: str) -> str:
+    """A setting's longer explanation: what it does and why its default (what ``--help`` leaves out).
+
+    >>> explain("temper").endswith("so 30 beams are not 30 independent measurements, and an over-confident "
+    ...                            "filter locks onto a wrong place.")
+    True
+    """
+    by_name = {f.name: f for f in fields(RunSettings)}
+    if name not in by_name:
+        raise ValueError(f"no setting {name!r}; the settings are {', '.join(by_name)}")
+    f = by_name[name]
+    text = " ".join(f.metadata["cli_help"].split()).format(default=_shown(f.default))
+    return text.split(" Example: ")[0].rstrip()
+
+
+def _default_text(f: Any) -> str:
+    if isinstance(f.default, bool):
+        return "default off"
+    if f.default is None:
+        return "default none"
+    return f"default {_shown(f.default)}"
+
+
+def add_arguments(parser: Any, groups: Mapping[str, Any] | None = None) -> None:
+    """Add one option per setting with a flag to ``parser`` (an argparse parser or argument group), or to
+    ``groups[name]`` by the setting's group in :data:`CLI_GROUPS` (sensor, filter, recovery).
 
     The option's destination is the setting's name; its default is the setting's
-    default, ``{default}`` in the help replaced by it; old flags (``--recovery``,
-    ``--short-beams``) are aliases.
+    default, and its help the one line of :data:`CLI_GROUPS` with the default;
+    old flags (``--recovery``, ``--short-beams``) are aliases (not listed).
 
     >>> ap = argparse.ArgumentParser()
     >>> add_arguments(ap)
     >>> ap.parse_args(["--short-beams", "0"]).skip_short_beams
     0.0
+    >>> "--short-beams" in ap.format_help(), "(default 1)" in ap.format_help()
+    (False, True)
     """
     for f in fields(RunSettings):
         m = f.metadata
         if not m["flag"]:
             continue
-        text = " ".join(m["cli_help"].split()).format(default=_shown(f.default))
-        names = ["--" + f.name.replace("_", "-"), *m["aliases"]]
+        group, brief = CLI_GROUPS.get(f.name, ("filter", m["help"]))
+        target = parser if groups is None else groups[group]
+        text = f"{brief} ({_default_text(f)})"
+        names = ["--" + f.name.replace("_", "-")]
         if isinstance(f.default, bool):
-            parser.add_argument(*names, dest=f.name, action="store_true", help=text)
+            target.add_argument(*names, dest=f.name, action="store_true", help=text)
             continue
         kw: dict[str, Any] = {k: m[k] for k in ("nargs", "metavar", "choices") if m[k] is not None}
         if m["choices"] is None:
             kw["type"] = argparse_type(_element_check(f), f.name)
-        parser.add_argument(*names, dest=f.name, default=f.default, help=text, **kw)
+        else:
+            kw.setdefault("metavar", "WHICH")  # the choices are in the help line
+        for alias in m["aliases"]:  # before the flag: the flag's action is the setting's last one
+            target.add_argument(alias, dest=f.name, default=f.default, help=argparse.SUPPRESS, **kw)
+        target.add_argument(*names, dest=f.name, default=f.default, help=text, **kw)
 
 
 def from_namespace(args: argparse.Namespace, **changes: Any) -> RunSettings:

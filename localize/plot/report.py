@@ -112,7 +112,7 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     ax.plot(*poses[-1, :2], marker="s", ms=9, mfc="none", mec="k", mew=1.5, ls="none", label="end", zorder=5)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.11), ncol=4, fontsize=8, frameon=False)  # off the map
     ax.set_title("trajectory over the map, coloured by state")
 
     if ref is not None:
