@@ -242,3 +242,19 @@ def test_map_warning_when_free_space_far_exceeds_what_the_scans_cover(demo):
     short = dataclasses.replace(few, ranges=np.minimum(few.ranges, 1.0))   # a laser that sees 1 m
     c = check_map(grid, None, short)
     assert c.scanned_m2 < 204 / 5 and any("times the" in w for w in c.warnings)
+
+
+# ---------------------------------------------------------------------------- the demo's terminal
+def test_demo_terminal_reads_for_a_first_time_user(tmp_path):
+    import re
+
+    status, text, err = run_cli("demo", "--out", tmp_path / "d", "--no-animate", "--seed", 0)
+    assert status == 0, err
+    lines = text.splitlines()
+    k = next(i for i, line in enumerate(lines) if "lost at scans" in line)
+    assert lines[k + 1].strip().startswith("(lost: the filter had been localized")   # what "lost" means, beside it
+    assert sum("from scan" in line for line in lines) == 1                              # one convergence number
+    speed = re.search(r"([\d.]+)x real time", text).group(1)
+    assert re.fullmatch(r"[1-9]\.\d|[1-9]\d?0*|0\.0*[1-9]\d?", speed), speed           # two significant figures
+    assert re.search(r"median error \d\.\d\d m while localized", text)
+    assert "final pose: x" in text

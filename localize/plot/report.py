@@ -122,7 +122,9 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     else:
         ax2.plot(t, np.asarray(trace.spread, dtype=float), color="k", lw=1.2, label="spread of the best cluster (m)")
         ax2.set_ylabel("spread of the best cluster (m)")
-    ax2.set_yscale("log")
+    shown = np.asarray(ax2.lines[0].get_ydata(), dtype=float)
+    if np.any(np.isfinite(shown) & (shown > 0)):  # log scale needs a positive value (a run of 3 particles may not)
+        ax2.set_yscale("log")
     for a, b, name in _state_runs(state):
         lo = t[a] - (0.5 if times is None else 0.0)
         hi = t[b] + (0.5 if times is None else 0.0)
