@@ -258,3 +258,28 @@ def test_demo_terminal_reads_for_a_first_time_user(tmp_path):
     assert re.fullmatch(r"[1-9]\.\d|[1-9]\d?0*|0\.0*[1-9]\d?", speed), speed           # two significant figures
     assert re.search(r"median error \d\.\d\d m while localized", text)
     assert "final pose: x" in text
+
+
+# ---------------------------------------------------------------------------- the result bag's covariance
+def test_result_bag_amcl_pose_carries_the_covariance(tmp_path, demo):
+    """/amcl_pose's 6x6 row-major covariance holds trajectory.csv's x, y, yaw terms at indices 0, 1, 5."""
+    pytest.importorskip("rosbags")
+    from rosbags.highlevel import AnyReader
+
+    from localize.io import rosbag
+
+    bag = rosbag.write_rosbag_log(tmp_path / "demo.bag", io.read_log(demo.log_path), storage="rosbag1")
+    status, _, err = run_cli("run", "--map", demo.map_path, "--log", bag, "--particles", 2000, "--scans", "0:20",
+                             "--quiet", "--out", tmp_path / "o")
+    assert status == 0, err
+    rows = list(csv.DictReader(open(tmp_path / "o" / "trajectory.csv")))
+    with AnyReader([tmp_path / "o" / "localization.bag"]) as r:
+        covs = [r.deserialize(raw, c.msgtype).pose.covariance.reshape(6, 6)
+                for c, _, raw in r.messages() if c.topic == "/amcl_pose"]
+    assert len(covs) == len(rows) == 20
+    idx = [0, 1, 5]
+    for row, c6 in zip(rows, covs):
+        c = c6[np.ix_(idx, idx)]
+        for n, (i, j) in cli.COV_COLUMNS.items():
+            assert c[i, j] == pytest.approx(float(row[n]), rel=1e-5, abs=1e-12)
+        assert np.allclose(c, c.T) and c6[2, 2] == 0 and c6[0, 0] > 0

@@ -42,6 +42,20 @@ def _state_runs(state: np.ndarray) -> list[tuple[int, int, str]]:
     return out
 
 
+def _draw_final_cloud(ax: Any, trace: Any, last: int, max_particles: int) -> None:
+    """The particles of the last step's snapshot (at most ``max_particles``), labelled with how many the filter had."""
+    if last not in getattr(trace, "snapshots", {}):
+        return
+    parts, w = trace.snapshots[last]
+    sub = slice(None) if len(parts) <= max_particles else np.linspace(0, len(parts) - 1, max_particles).astype(int)
+    n_all = getattr(trace, "n_particles", None)
+    n_all = int(n_all[last]) if n_all is not None and len(n_all) > last else len(parts)
+    shown = min(len(parts), max_particles)
+    label = f"final particles ({n_all:,})" if shown >= n_all else f"final particles ({shown:,} of {n_all:,})"
+    ax.scatter(parts[sub, 0], parts[sub, 1], s=2, color="tab:purple", alpha=0.35, linewidths=0, label=label,
+               zorder=2)
+
+
 def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None = None, *,
                   times: ArrayLike | None = None, title: str | None = None, max_particles: int = 3000) -> Figure:
     """The report picture of a run (see the module's docstring); returns the Figure.
@@ -91,16 +105,7 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1.35, 1.0]})
     draw_map(grid, ax=ax)
     last = len(poses) - 1
-    if last in getattr(trace, "snapshots", {}):
-        parts, w = trace.snapshots[last]
-        sub = slice(None) if len(parts) <= max_particles else np.linspace(0, len(parts) - 1, max_particles).astype(int)
-        n_all = getattr(trace, "n_particles", None)
-        n_all = int(n_all[last]) if n_all is not None and len(n_all) > last else len(parts)
-        shown = len(parts) if len(parts) <= max_particles else max_particles
-        label = (f"final particles ({n_all:,})" if shown >= n_all else
-                 f"final particles ({shown:,} of {n_all:,})")
-        ax.scatter(parts[sub, 0], parts[sub, 1], s=2, color="tab:purple", alpha=0.35, linewidths=0,
-                   label=label, zorder=2)
+    _draw_final_cloud(ax, trace, last, max_particles)
     if ref is not None:
         ax.plot(ref[:, 0], ref[:, 1], color="k", lw=1.0, alpha=0.6, label="reference", zorder=3)
     ax.plot(poses[:, 0], poses[:, 1], color="0.4", lw=0.6, alpha=0.7, zorder=3)
