@@ -127,8 +127,8 @@ update_min_d, update_min_a                 --min-motion
 resample_interval                          1: resample after every update (resample_threshold 1);
                                              >1: no counterpart (N_eff < N/2 is used)
 selective_resampling (ROS 1)               true: resample_threshold 0.5
-initial_pose_x/_y/_a, initial_cov_xx/_yy/_aa  --initial-pose X Y YAW, --initial-std sqrt(cov) (nav2:
-  (nav2: initial_pose x/y/yaw)                 with set_initial_pose true; covariances default 0.25 0.25 0.0685)
+initial_pose / initial_pose_x, _y, _a      --initial-pose (nav2: with set_initial_pose true)
+initial_cov_xx, _yy, _aa                   --initial-std: their square roots (defaults 0.25, 0.25, 0.0685)
 frames, topics, tf, beam skipping, random_seed: ignored, each with a warning
 (--temper and --seed stay localize settings; options given on the command line win over the file)"""
 

@@ -117,7 +117,9 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     ax.plot(*poses[-1, :2], marker="s", ms=9, mfc="none", mec="k", mew=1.5, ls="none", label="end", zorder=5)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.11), ncol=4, fontsize=8, frameon=False)  # off the map
+    leg = ax.legend(loc="lower left", bbox_to_anchor=(0.01, 0.0), bbox_transform=fig.transFigure, ncol=4, fontsize=8,
+                    frameon=False)  # below the panels, off the map (the layout leaves the figure's bottom free)
+    leg.set_in_layout(False)
     ax.set_title("trajectory over the map, coloured by state")
 
     if ref is not None:
@@ -141,5 +143,5 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     ax2.set_title("error" if ref is not None else "spread", loc="left")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.09, 1, 1))
     return fig
