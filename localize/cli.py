@@ -17,11 +17,17 @@ model, resample. It writes
   deviation, metres), ``n_eff`` and ``state`` (``searching``, ``localized``
   or ``lost``, from the filter's own evidence: see
   :class:`localize.policies.StateRules`); with reference poses in the log also
-  ``ref_x,ref_y,ref_theta,error``;
+  ``ref_x,ref_y,ref_theta,error``; last the pose covariance of the heaviest
+  cluster, ``cov_xx,cov_xy,cov_xtheta,cov_yy,cov_ytheta,cov_thetatheta``;
+* ``DIR/report.png`` — the map with the trajectory coloured by state, the
+  reference (the log's, or ``--reference FILE``), the final particles, and the
+  error (or spread) against time (:func:`localize.plot.report.report_figure`);
 * ``DIR/summary.json`` — particles, scans, seconds per scan, real-time factor,
   the ``state`` section (first localized scan, lost intervals, final state,
   events such as rejected odometry records), errors against the reference
-  while localized, and the settings used;
+  while localized, the final pose with its covariance, the map check
+  (:func:`localize.pipeline.check_map`), and the settings used;
+* ``DIR/map.yaml`` + ``map.pgm`` with ``--build-map`` (the map the run used);
 * ``DIR/particles.gif`` (with ``--animate``; ``.mp4`` too when ``ffmpeg`` exists).
 
 ``DIR`` always holds one complete run or none (:mod:`localize._output`): the
@@ -753,9 +759,11 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
         write_ros_map(dest.path("map.yaml"), trinary)
         outputs += ["map.yaml", "map.pgm"]
     ref, ref_note = (reference if reference is not None else log.poses), reference_note
+    t_report = time.perf_counter()
     write_report(dest.path("report.png"), grid, res, ref,
                  title=f"{Path(args.log).name}: {headline_short(res)}" + (f" (reference: {ref_note})" if ref_note
                                                                           else ""))
+    t_report = time.perf_counter() - t_report
     outputs.append("report.png")
     summary = summarize(res, log, settings.particles, log.poses,
                         _settings_section(args, settings, log, map_desc, amcl, is_bag))
@@ -763,6 +771,7 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
         summary["settings"]["smooth"] = True
         summary["smooth"] = res.smooth.summary()
     summary["seconds_reading_files"] = round(t_read, 3)
+    summary["seconds_report"] = round(t_report, 3)
     summary["map_check"] = {"free_m2": round(map_check.free_m2, 1), "outside_m2": round(map_check.outside_m2, 1),
                             "robot_m2": round(map_check.robot_m2, 1), "free_share": round(map_check.free_share, 3),
                             "scanned_m2": None if map_check.scanned_m2 is None else round(map_check.scanned_m2, 1),

@@ -353,6 +353,7 @@ def localize_log(grid: OccupancyGrid, log, settings: RunSettings | None = None, 
                                 unknown_penalty=s.unknown_penalty, min_ess=s.min_ess,
                                 occupied_penalty=s.occupied_penalty)
     if s.initial_pose is not None:  # a known start (--initial-pose, AMCL's initial_pose_*)
+        _check_initial_pose(grid, s)
         f = MCL.gaussian(np.asarray(s.initial_pose, dtype=float), tuple(s.initial_std), n_particles, motion, model,
                          rng=rng, grid=grid, **opts)
     elif not s.track:
@@ -374,6 +375,17 @@ def localize_log(grid: OccupancyGrid, log, settings: RunSettings | None = None, 
                     skip_unknown_beams=s.unknown_beams == "skip", skip_short_beams=s.skip_short_beams,
                     callback=None if progress is None else progress.update_to)
     return RunResult(times=np.asarray(log.times), trace=tr, odometry_check=sign_check)
+
+
+def _check_initial_pose(grid: OccupancyGrid, s: RunSettings) -> None:
+    """ValueError if ``s.initial_pose`` lies off the map, or comes with ``track``."""
+    if s.track:
+        raise ValueError("give either --track (the log's first reference pose) or --initial-pose, not both")
+    x, y = s.initial_pose[0], s.initial_pose[1]
+    if not grid.contains(np.array([[x, y]]))[0]:
+        x0, y0 = grid.origin
+        raise ValueError(f"--initial-pose {x:g} {y:g}: outside the map ({x0:g} to {x0 + grid.width_m:g} m in x, "
+                         f"{y0:g} to {y0 + grid.height_m:g} m in y); give the pose in the map's frame")
 
 
 def _sensor_params(s: RunSettings) -> dict[str, Any]:

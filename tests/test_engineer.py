@@ -283,3 +283,13 @@ def test_result_bag_amcl_pose_carries_the_covariance(tmp_path, demo):
         for n, (i, j) in cli.COV_COLUMNS.items():
             assert c[i, j] == pytest.approx(float(row[n]), rel=1e-5, abs=1e-12)
         assert np.allclose(c, c.T) and c6[2, 2] == 0 and c6[0, 0] > 0
+
+
+def test_initial_pose_errors(demo):
+    grid, log = io.read_map(demo.map_path), io.read_log(demo.log_path)
+    with pytest.raises(ValueError, match="outside the map"):
+        localize_log(grid, log, RunSettings(particles=100, initial_pose=(-50.0, 3.0, 0.0)),
+                     rng=np.random.default_rng(0))
+    with pytest.raises(ValueError, match="either --track"):
+        localize_log(grid, log, RunSettings(particles=100, initial_pose=(5.0, 3.0, 0.0), track=True),
+                     rng=np.random.default_rng(0))
