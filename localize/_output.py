@@ -67,7 +67,7 @@ __all__ = ["RunOutput", "RESULT_FILES", "LOCK_NAME"]
 
 #: Every file a run may write into ``--out``; those a run does not write are removed as stale.
 RESULT_FILES = ("trajectory.csv", "trajectory.tum", "reference.tum", "localization.bag", "localization_bag",
-                "summary.json", "particles.gif", "particles.mp4")
+                "report.png", "map.yaml", "map.pgm", "summary.json", "particles.gif", "particles.mp4")
 #: The lock file of a folder being written.
 LOCK_NAME = ".localize.lock"
 _STAGE_PREFIX = ".localize-partial-"

@@ -96,7 +96,7 @@ _IGNORED = {
         "use_sim_time", "introspection_mode", "bond_heartbeat_period", "map_subscribe_transient_local",
         "receive_map_topic", "restore_defaults", "service_introspection_mode", "bond_disable_heartbeat_timeout",
         "freespace_downsampling"),
-    "initial pose: localize run localizes globally (or, with --track, from the log's first reference pose)": (
+    "initial pose: not set (nav2: set_initial_pose is false), so localize run localizes globally": (
         "set_initial_pose", "always_reset_initial_pose", "initial_pose", "initial_pose_x", "initial_pose_y",
         "initial_pose_a", "initial_cov_xx", "initial_cov_yy", "initial_cov_aa"),
     "beam skipping is not implemented in localize (--short-beams and --unknown-beams leave beams out by other rules)": (
@@ -127,7 +127,9 @@ update_min_d, update_min_a                 --min-motion
 resample_interval                          1: resample after every update (resample_threshold 1);
                                              >1: no counterpart (N_eff < N/2 is used)
 selective_resampling (ROS 1)               true: resample_threshold 0.5
-frames, topics, tf, initial pose, beam skipping, random_seed: ignored, each with a warning
+initial_pose / initial_pose_x, _y, _a      --initial-pose (nav2: with set_initial_pose true)
+initial_cov_xx, _yy, _aa                   --initial-std: their square roots (defaults 0.25, 0.25, 0.0685)
+frames, topics, tf, beam skipping, random_seed: ignored, each with a warning
 (--temper and --seed stay localize settings; options given on the command line win over the file)"""
 
 
@@ -455,6 +457,46 @@ def _resampling(p: _Params, m: AmclMapping) -> None:
                                                              "localize resamples when N_eff < N/2"))
 
 
+#: AMCL's default initial covariances (initial_cov_xx, _yy, _aa: 0.5 m, 0.5 m, pi/12 standard deviations).
+_INITIAL_COV = {"initial_cov_xx": 0.25, "initial_cov_yy": 0.25, "initial_cov_aa": (math.pi / 12) ** 2}
+
+
+def _finite(p: _Params, c: str, value: Any, label: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+        raise FormatError(p.source, p.where(c), f"{label} must be a number; got {value!r}")
+    return float(value)
+
+
+def _initial_pose(p: _Params, m: AmclMapping) -> None:
+    """A known start: ROS 1's initial_pose_x/_y/_a, nav2's initial_pose (with set_initial_pose), initial_cov_*."""
+    xya = ("initial_pose_x", "initial_pose_y", "initial_pose_a")
+    if any(c in p.vals for c in xya):
+        pose = tuple(_finite(p, c, p.vals.get(c, 0.0), c) for c in xya)
+        label = ", ".join(xya)
+    elif p.vals.get("set_initial_pose") is True and "initial_pose" in p.vals:
+        d = p.vals["initial_pose"]
+        if not isinstance(d, dict):
+            raise FormatError(p.source, p.where("initial_pose"), f"initial_pose must hold x, y, yaw; got {d!r}")
+        pose = tuple(_finite(p, "initial_pose", d.get(k, 0.0), f"initial_pose.{k}") for k in ("x", "y", "yaw"))
+        label = "set_initial_pose, initial_pose"
+        p.used.add("set_initial_pose")
+    else:
+        return
+    p.used.update(xya + ("initial_pose",))
+    var = []
+    for c, default in _INITIAL_COV.items():
+        p.used.add(c)
+        v = _finite(p, c, p.vals.get(c, default), c)
+        if v <= 0:
+            raise FormatError(p.source, p.where(c), f"{c} must be a variance > 0; got {v:g}")
+        var.append(v)
+    std = tuple(round(math.sqrt(v), 6) for v in var)
+    m.settings["initial_pose"], m.settings["initial_std"] = pose, std
+    m.rows.append((label, pose, "initial_pose = ({:g}, {:g}, {:g})".format(*pose), "tracking from a known start"))
+    m.rows.append(("initial_cov_xx, _yy, _aa", tuple(var), "initial_std = ({:g}, {:g}, {:g})".format(*std),
+                   "standard deviations"))
+
+
 def amcl_settings(params: dict, source: str = "<dict>", nav2: bool | None = None,
                   lines: list[str] | None = None) -> AmclMapping:
     """Map a dict of AMCL parameters (either dialect) to localize settings; see :func:`read_amcl_params`.
@@ -482,6 +524,7 @@ def amcl_settings(params: dict, source: str = "<dict>", nav2: bool | None = None
     m.rows.append((f"{p.label('update_min_d')}, {p.label('update_min_a')}", (d_ref, a_ref),
                    f"min_motion = ({d_ref:g}, {a_ref:g})", ""))
     _resampling(p, m)
+    _initial_pose(p, m)
     reasons = {n: r for r, ns in _IGNORED.items() for n in ns}
     for c, k in p.names.items():
         if c not in p.used:

@@ -17,11 +17,17 @@ model, resample. It writes
   deviation, metres), ``n_eff`` and ``state`` (``searching``, ``localized``
   or ``lost``, from the filter's own evidence: see
   :class:`localize.policies.StateRules`); with reference poses in the log also
-  ``ref_x,ref_y,ref_theta,error``;
+  ``ref_x,ref_y,ref_theta,error``; last the pose covariance of the heaviest
+  cluster, ``cov_xx,cov_xy,cov_xtheta,cov_yy,cov_ytheta,cov_thetatheta``;
+* ``DIR/report.png`` — the map with the trajectory coloured by state, the
+  reference (the log's, or ``--reference FILE``), the final particles, and the
+  error (or spread) against time (:func:`localize.plot.report.report_figure`);
 * ``DIR/summary.json`` — particles, scans, seconds per scan, real-time factor,
   the ``state`` section (first localized scan, lost intervals, final state,
   events such as rejected odometry records), errors against the reference
-  while localized, and the settings used;
+  while localized, the final pose with its covariance, the map check
+  (:func:`localize.pipeline.check_map`), and the settings used;
+* ``DIR/map.yaml`` + ``map.pgm`` with ``--build-map`` (the map the run used);
 * ``DIR/particles.gif`` (with ``--animate``; ``.mp4`` too when ``ffmpeg`` exists).
 
 ``DIR`` always holds one complete run or none (:mod:`localize._output`): the
@@ -79,11 +85,13 @@ from .pipeline import (  # noqa: F401
     augmented_filter,
     auto_particles,
     check_log_odometry,
+    check_map,
     converged_at,
     kld_sampling,
     localize_log,
     make_sensor,
     map_summary,
+    particles_for_area,
     read_inputs,
     read_log_file,
     resolve_particles,
@@ -115,6 +123,18 @@ examples:
 
   # a ROS map whose walls are painted grey (see `localize.io.ros`)
   localize run --map willow.yaml --not-free-is-occupied --log sim.log
+"""
+
+
+RUN_EXAMPLES = """\
+examples:
+  # a CARMEN log with corrected poses: build the map from them, localize
+  localize run --log intel-corrected.log.gz --build-map --out out/intel
+  # your robot: a ROS 2 bag folder, its map_server map, its AMCL parameters
+  localize run --map office.yaml --log office_run/ --amcl-params nav2.yaml
+  # a known start (x y yaw), and a reference trajectory to compare with
+  localize run --map office.yaml --log office_run/ --initial-pose 2 3.5 1.57 \\
+               --reference gt.tum
 """
 
 
@@ -160,15 +180,56 @@ class Progress(tqdm):
 
 
 # ============================================================================ outputs
-def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = None) -> Path:
-    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state`` (+ reference and error)."""
+#: The pose covariance's columns of ``trajectory.csv`` and their (row, column) in the 3x3 covariance of x, y, theta.
+COV_COLUMNS = {"cov_xx": (0, 0), "cov_xy": (0, 1), "cov_xtheta": (0, 2), "cov_yy": (1, 1), "cov_ytheta": (1, 2),
+               "cov_thetatheta": (2, 2)}
+
+
+def pose_covariances(res: RunResult) -> NDArray:
+    """``(T, 3, 3)``: the covariance of x, y, theta behind each estimate of ``res``.
+
+    For one pass, the weighted covariance of the best cluster
+    (:attr:`localize.runloop.RunTrace.cov`). For ``--smooth``, the covariance
+    of the pass whose estimate is used at the scan; where both passes agree
+    and the estimate is their weighted mean, the two covariances fused as
+    independent estimates, ``(Cf^-1 + Cb^-1)^-1`` (the two passes share only
+    the scan itself, so this is slightly over-confident).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> c = np.repeat(np.eye(3)[None] * 0.04, 2, axis=0)
+    >>> float(pose_covariances(SimpleNamespace(covariances=c, smooth=None))[0, 0, 0])
+    0.04
+    """
+    sm = getattr(res, "smooth", None)
+    cf = None if sm is None else getattr(sm.forward, "cov", None)
+    cb = None if sm is None else getattr(sm.backward, "cov", None)
+    if cf is None or cb is None:
+        return np.asarray(res.covariances, dtype=float)
+    pick_b = sm.source == "backward" if sm.from_backward is None else sm.from_backward
+    out = np.where(np.asarray(pick_b)[:, None, None], cb, cf)
+    both = np.asarray(sm.source) == "both"
+    if both.any():
+        reg = 1e-12 * np.eye(3)
+        out[both] = np.linalg.inv(np.linalg.inv(cf[both] + reg) + np.linalg.inv(cb[both] + reg))
+    return out
+
+
+def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = None,
+                     covariances: NDArray | None = None) -> Path:
+    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state`` (+ reference and error, the smoother's
+    columns), then the pose covariance ``cov_xx ... cov_thetatheta`` (:data:`COV_COLUMNS`; ``covariances``,
+    default :func:`pose_covariances`)."""
     cols = ["time", "x", "y", "theta", "spread", "n_eff", "state"]
     state = res.state if res.state is not None else np.full(len(res.times), "")
     if reference is not None:
         cols += ["ref_x", "ref_y", "ref_theta", "error"]
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
     extra = getattr(res, "columns", None) or {}  # more per-scan columns (localize.smooth: passes, source)
-    cols += list(extra)
+    cols += list(extra) + list(COV_COLUMNS)
+    cov = pose_covariances(res) if covariances is None else np.asarray(covariances, dtype=float)
+    cov_terms = np.stack([cov[:, i, j] for i, j in COV_COLUMNS.values()], axis=1)
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(cols)
@@ -177,7 +238,7 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
                    f"{res.n_eff[k]:.1f}", str(state[k])]
             if reference is not None:
                 row += [*(f"{v:.6f}" for v in reference[k]), f"{err[k]:.4f}"]
-            w.writerow(row + [str(v[k]) for v in extra.values()])
+            w.writerow(row + [str(v[k]) for v in extra.values()] + [f"{v:.6g}" for v in cov_terms[k]])
     return path
 
 
@@ -201,7 +262,11 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
         "convergence_criterion": (f"first scan from which the particles' position spread (or, for *_reference, "
                                   f"the error) stays below the threshold for {hold} scans"),
         "final_estimate": [round(float(v), 4) for v in res.estimates[-1]],
+        "final_pose": final_pose(res),
     }
+    if res.trace is not None and getattr(res.trace, "n_valid", None) is not None:
+        out["valid_readings_median"] = float(np.median(res.trace.n_valid))
+        out["beams_used"] = int(min(settings.get("beams") or log.n_beams, log.n_beams))
     if not reliable:
         out["real_time_factor_note"] = "the log's time stamps are not usable (too coarse or out of order)"
     if res.trace is not None:
@@ -231,6 +296,52 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
             out["localized_scans_over_1m_off"] = int(np.sum(loc & (err > 1.0)))
     out["settings"] = settings
     return out
+
+
+def final_pose(res: RunResult) -> dict:
+    """The last scan's estimate and its covariance (x, y, theta; metres and radians), as ``summary.json`` holds it.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> r = SimpleNamespace(estimates=np.array([[1.0, 2.0, 0.5]]), covariances=np.eye(3)[None] * 0.01, smooth=None,
+    ...                     times=np.array([3.0]), state=np.array(["localized"]))
+    >>> fp = final_pose(r)
+    >>> fp["x"], fp["theta"], fp["std"], fp["state"]
+    (1.0, 0.5, [0.1, 0.1, 0.1], 'localized')
+    """
+    x, y, th = (round(float(v), 4) for v in res.estimates[-1])
+    c = pose_covariances(res)[-1]
+    state = getattr(res, "state", None)
+    return {"time": round(float(res.times[-1]), 6), "x": x, "y": y, "theta": th,
+            "covariance": [[float(f"{v:.6g}") for v in row] for row in c],
+            "std": [round(float(np.sqrt(max(c[i, i], 0.0))), 4) for i in range(3)],
+            "state": None if state is None else str(state[-1])}
+
+
+def write_report(path: Path, grid: OccupancyGrid, res: RunResult, reference: NDArray | None = None,
+                 title: str | None = None, dpi: int = 90) -> Path:
+    """Save ``report.png``: :func:`localize.plot.report.report_figure` of the run (the final cloud is the last
+    scan's snapshot, which :func:`localize.pipeline.localize_log` always keeps).
+
+    The second panel's axis is the time since the first scan when the log's
+    time stamps increase, else the scan index.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from .plot.report import report_figure
+
+    t = np.asarray(res.times, dtype=float)
+    times = t - t[0] if len(t) > 1 and np.all(np.diff(t) > 0) else None
+    fig = report_figure(grid, res.trace, reference, times=times, title=title)
+    try:
+        fig.savefig(path, dpi=dpi)
+    finally:
+        plt.close(fig)
+    return path
 
 
 def write_summary(path: Path, summary: dict) -> Path:
@@ -268,6 +379,41 @@ def headline(summary: dict) -> str:
     if rejected:
         parts.append(f"{rejected} impossible odometry step(s) rejected")
     return "; ".join(parts)
+
+
+def advice(summary: dict) -> list[str]:
+    """What to try when a run ends lost or searching, from the evidence in ``summary`` (empty otherwise).
+
+    * few valid readings per scan (median below a third of the beams used):
+      the range limits, ``--max-range`` / ``--min-range``;
+    * never localized: ``--particles`` (more of the pose space covered), and
+      the map (does the report's map match the scans?);
+    * lost after a stretch localized: ``--restart-after`` / ``--recovery-injection``.
+
+    Examples
+    --------
+    >>> s = {"particles": 20000, "valid_readings_median": 3, "beams_used": 30,
+    ...      "state": {"final_state": "searching", "first_localized_scan": None, "lost_intervals": []}}
+    >>> for line in advice(s): print(line[:60])
+    try --max-range / --min-range: a scan has 3 valid readings o
+    try --particles 40000: never localized with 20000 particles;
+    """
+    st = summary.get("state") or {}
+    if st.get("final_state", "localized") == "localized":
+        return []
+    out = []
+    valid, beams = summary.get("valid_readings_median"), summary.get("beams_used")
+    if valid is not None and beams and valid < beams / 3:
+        out.append(f"try --max-range / --min-range: a scan has {valid:g} valid readings of {beams} beams (median); "
+                   "readings beyond --max-range or at most --min-range are not evidence")
+    n = summary.get("particles", 0)
+    if st.get("first_localized_scan") is None:
+        out.append(f"try --particles {2 * n}: never localized with {n} particles; more cover more of the map's "
+                   "poses (and check in report.png that the map fits the scans)")
+    elif st.get("final_state") == "lost":
+        out.append("try --restart-after 3 or --recovery-injection 0.05: localized for a stretch, then lost to the "
+                   "end; a sooner restart or random particles while lost search the map again")
+    return out
 
 
 def write_animation(out_dir: Path, grid: OccupancyGrid, res: RunResult, reference: NDArray | None,
@@ -328,6 +474,13 @@ _particles = _settings.argparse_type(_settings.check_particles, "particles")
 _positive_float = _settings.argparse_type(lambda v, name: check_positive(v, name, "metres"), "positive_float")
 
 
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """``--help``: the description and examples as written, each option's line after a 28-column name."""
+
+    def __init__(self, prog: str) -> None:
+        super().__init__(prog, max_help_position=28)
+
+
 def _wrap(text: str, width: int = 79) -> str:
     """Wrap a help paragraph (the parsers use RawDescriptionHelpFormatter to keep the examples' layout)."""
     return textwrap.fill(" ".join(text.split()), width=width)
@@ -349,14 +502,14 @@ def _scan_slice(s: str) -> slice:
 def _add_resolution(parser: Any, what: str) -> None:
     """``--resolution``: the cell size of the map that ``run --build-map`` and ``map`` build from a log."""
     parser.add_argument("--resolution", type=_positive_float, default=0.05, metavar="M",
-                        help=f"cell size of {what}, metres (default 0.05). Example: --resolution 0.1")
+                        help=f"{what}'s cell size, m (default 0.05)")
 
 
 def _add_frames_and_quiet(parser: Any, frames: int) -> None:
     """``--frames`` and ``--quiet``: the options of ``run`` that ``demo`` passes on to it."""
     parser.add_argument("--frames", type=_positive_int, default=frames, metavar="K",
-                        help=f"number of animation frames (default {frames}). Example: --frames {2 * frames}")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary on the terminal.")
+                        help=f"animation frames (default {frames})")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar, no summary (default off)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -372,72 +525,53 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser(
         "run", help="global localization with MCL on a log",
-        description=_wrap("Global localization with Monte Carlo Localization: particles start uniform over the "
-                          "map's free space and are moved by the log's odometry and weighted by its laser scans. "
-                          "Writes DIR/trajectory.csv (time,x,y,theta per scan, map frame, metres and radians, and the "
-                          "filter's state: searching, localized or lost), "
-                          "DIR/summary.json, DIR/trajectory.tum (for evo) and, with --animate, DIR/particles.gif; "
-                          "for a ROS bag also DIR/localization.bag (ROS 1) or DIR/localization_bag/ (ROS 2) with "
-                          "/amcl_pose and the particle cloud. The results appear together "
-                          "when the run is complete (an interrupted run leaves DIR as it was), results of an "
-                          "earlier run that this one does not produce are removed, and two runs cannot write "
-                          "one DIR at the same time."),
-        epilog=EXAMPLES + "\nAMCL parameters (--amcl-params FILE.yaml), ROS 1 amcl or nav2 nav2_amcl:\n" + _amcl_table(),
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+        usage="localize run --log FILE (--map FILE | --build-map) [--out DIR] [options]",
+        description=_wrap("Monte Carlo Localization on a log: particles start over the map's free space (or "
+                          "around --initial-pose), move with the odometry and are weighted by the laser scans. "
+                          "Writes DIR/trajectory.csv (pose, state, covariance per scan), DIR/report.png, "
+                          "DIR/summary.json and DIR/trajectory.tum; all together when the run is complete."),
+        epilog=RUN_EXAMPLES + "\nAMCL parameters (--amcl-params FILE.yaml), ROS 1 amcl or nav2 nav2_amcl:\n"
+        + _amcl_table() + "\n\nEach setting's rationale: localize.settings.explain(NAME), and chapter 9.",
+        formatter_class=_HelpFormatter)
     g = run.add_argument_group("input")
-    g.add_argument("--map", type=Path, metavar="FILE",
-                   help="the map: a CMU 16-831 map (wean.dat) or a ROS map_server YAML. "
-                        "Example: --map wean.dat")
     g.add_argument("--log", type=Path, metavar="FILE", required=True,
-                   help="the log: CMU 16-831 (O/L records, cm), CARMEN (FLASER/ODOM ..., may be gzipped), a ROS 1 "
-                        "bag or a ROS 2 bag folder (sqlite3 or MCAP; needs pip install \"localize[ros]\"). "
-                        "Example: --log robotdata1.log or --log robot.bag")
-    g.add_argument("--map-format", choices=["cmu", "ros"], default=None,
-                   help="override the map format detected from the file's content. Example: --map-format ros")
-    g.add_argument("--log-format", choices=["cmu", "carmen", "rosbag"], default=None,
-                   help="override the log format detected from the file's content. Example: --log-format carmen")
-    g.add_argument("--scan-topic", metavar="TOPIC", default=None,
-                   help="ROS bags: the sensor_msgs/LaserScan topic (needed when the bag has several). "
-                        "Example: --scan-topic /front/scan")
-    g.add_argument("--odom-topic", metavar="TOPIC", default=None,
-                   help="ROS bags: the nav_msgs/Odometry topic (default: the bag's one, else the odom -> base "
-                        "transform on /tf; --odom-topic /tf forces the latter). Example: --odom-topic /wheel/odom")
-    g.add_argument("--laser-pose", type=float, nargs=3, default=None, metavar=("X", "Y", "YAW"),
-                   help="the laser's mounting pose in the robot frame, metres and radians; overrides the log's "
-                        "(a bag's /tf_static, CMU's 25 cm ahead). Needed for a bag without /tf_static. "
-                        "Example: --laser-pose 0.2 0 0")
-    g.add_argument("--amcl-params", type=Path, default=None, metavar="FILE.yaml",
-                   help="take the filter settings from a ROS 1 amcl or nav2 AMCL parameter file (the mapping is "
-                        "printed; options given on the command line win). Example: --amcl-params nav2_params.yaml")
+                   help="CMU, CARMEN, ROS bag or bag folder (required)")
+    g.add_argument("--map", type=Path, metavar="FILE",
+                   help="CMU map or map_server YAML (default none)")
     g.add_argument("--build-map", action="store_true",
-                   help="instead of --map, build the map from the log's reference (corrected) poses, as CARMEN "
-                        "corrected logs carry them. Example: --build-map --resolution 0.05")
-    _add_resolution(g, "a map built with --build-map")
+                   help="map from the log's poses, saved (default off)")
+    _add_resolution(g, "the map")
+    g.add_argument("--amcl-params", type=Path, default=None, metavar="FILE",
+                   help="settings from an amcl / nav2 YAML (default none)")
+    g.add_argument("--reference", type=Path, default=None, metavar="FILE",
+                   help="TUM or CSV time,x,y,theta (default: the log's)")
+    g.add_argument("--scans", type=_scan_slice, default=None, metavar="A:B[:S]",
+                   help="only these scans, a Python slice (default all)")
+    g.add_argument("--laser-pose", type=float, nargs=3, default=None, metavar=("X", "Y", "YAW"),
+                   help="laser's pose on the robot (default: the log's)")
+    g.add_argument("--scan-topic", metavar="TOPIC", default=None,
+                   help="bags: LaserScan topic (default: the only one)")
+    g.add_argument("--odom-topic", metavar="TOPIC", default=None,
+                   help="bags: Odometry topic or /tf (default: found)")
+    g.add_argument("--map-format", choices=["cmu", "ros"], default=None, metavar="FMT",
+                   help="map format: cmu, ros (default: detected)")
+    g.add_argument("--log-format", choices=["cmu", "carmen", "rosbag"], default=None, metavar="FMT",
+                   help="cmu, carmen, rosbag (default: detected)")
     g.add_argument("--not-free-is-occupied", action="store_true",
-                   help="ROS maps: treat every cell that is not free as an obstacle (maps with grey walls).")
-    g.add_argument("--scans", type=_scan_slice, default=None, metavar="START:STOP[:STEP]",
-                   help="use only these scans of the log (Python slice). Example: --scans 0:500 or --scans ::2")
-    f = run.add_argument_group("filter")
-    f.add_argument("--seed", type=_seed, default=0, metavar="S",
-                   help="seed of the random generator, a whole number >= 0: the same seed gives the same run "
-                        "(default 0). "
-                        "Example: --seed 7")
-    _settings.add_arguments(f)  # one option per setting of localize.settings.RunSettings
-    f.add_argument("--smooth", action="store_true",
-                   help="offline: filter the recorded log forwards and again backwards in time (the same settings, "
-                        "the log reversed), and combine the two passes scan by scan. The backward pass localizes "
-                        "the start that the forward pass spent searching; where both are localized but disagree "
-                        "(a look-alike corridor), the pass whose estimates fit the scans better wins, and a tie "
-                        "is reported as not localized. trajectory.csv gets the columns passes (both, disagree, "
-                        "forward, backward, none: which passes are localized at the scan and whether they agree) "
-                        "and source; summary.json a 'smooth' section. Takes twice as long (see localize.smooth). "
-                        "Example: --smooth")
+                   help="ROS maps: grey is wall, not unknown (default off)")
+    groups = {"sensor": run.add_argument_group("sensor"), "filter": run.add_argument_group("filter")}
+    groups["recovery"] = run.add_argument_group(
+        "recovery", "when the filter is wrong; the default --restart-after 5 suffices so far")
+    _settings.add_arguments(run, groups)  # one option per setting of localize.settings.RunSettings
+    groups["filter"].add_argument("--seed", type=_seed, default=0, metavar="S",
+                                  help="random seed: same seed, same run (default 0)")
+    groups["filter"].add_argument("--smooth", action="store_true",
+                                  help="offline: filter forwards and back (default off)")
     o = run.add_argument_group("output")
     o.add_argument("--out", type=Path, default=Path("localize-out"), metavar="DIR",
-                   help="output folder, created if needed and checked before the run starts; it holds one "
-                        "complete run's results or none (default ./localize-out). Example: --out out/wean")
+                   help="output folder (default ./localize-out)")
     o.add_argument("--animate", action="store_true",
-                   help="also write DIR/particles.gif (and particles.mp4 when ffmpeg is installed).")
+                   help="also DIR/particles.gif and .mp4 (default off)")
     _add_frames_and_quiet(o, frames=100)
 
     mp = sub.add_parser(
@@ -593,9 +727,17 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
     """Read, filter (:mod:`localize.pipeline`), write the outputs into ``dest`` and report."""
     t_start = time.perf_counter()
     log, grid, map_desc = read_inputs(inputs, settings.min_range, warn=_warner(err))
+    map_check = check_map(grid, inputs.map, log, max_range=settings.max_range)
+    for w in map_check.warnings:
+        _warner(err)(f"{map_desc}: {w}")
+    if settings.particles == "auto" and map_check.robot_m2 < map_check.free_m2:  # sized from where the robot can be
+        settings = replace(settings, particles=particles_for_area(map_check.robot_m2))
+        _warner(err)(f"--particles auto: {settings.particles} particles for the {map_check.robot_m2:.0f} m^2 the "
+                     "robot can be in (the initial cloud still covers all free cells)")
     settings = replace(settings, particles=resolve_particles(settings.particles, grid))
     check_memory(settings.particles, min(settings.beams, log.n_beams), settings.sensor,
                  n_cells=grid.data.size)  # before allocating
+    reference, reference_note = _reference(args, log)
     t_read = time.perf_counter() - t_start
     progress = Progress(len(log), stream=err, enabled=None if not args.quiet else False)
     is_bag = log.format in BAG_FORMATS
@@ -609,12 +751,34 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
     progress.close()
     write_trajectory(dest.path("trajectory.csv"), res, log.poses)
     outputs = _write_standard_outputs(dest.stage, res, log, err)
+    if inputs.build_map:  # the map the run used, for --map next time
+        from .io import write_ros_map
+
+        trinary = OccupancyGrid(np.where(grid.occupied, 1.0, np.where(grid.free, 0.0, np.nan)), grid.resolution,
+                                origin=tuple(grid.origin))  # the run's free / occupied / unknown, as --map reads them
+        write_ros_map(dest.path("map.yaml"), trinary)
+        outputs += ["map.yaml", "map.pgm"]
+    ref, ref_note = (reference if reference is not None else log.poses), reference_note
+    t_report = time.perf_counter()
+    write_report(dest.path("report.png"), grid, res, ref,
+                 title=f"{Path(args.log).name}: {headline_short(res)}" + (f" (reference: {ref_note})" if ref_note
+                                                                          else ""))
+    t_report = time.perf_counter() - t_report
+    outputs.append("report.png")
     summary = summarize(res, log, settings.particles, log.poses,
                         _settings_section(args, settings, log, map_desc, amcl, is_bag))
     if args.smooth:
         summary["settings"]["smooth"] = True
         summary["smooth"] = res.smooth.summary()
     summary["seconds_reading_files"] = round(t_read, 3)
+    summary["seconds_report"] = round(t_report, 3)
+    summary["map_check"] = {"free_m2": round(map_check.free_m2, 1), "outside_m2": round(map_check.outside_m2, 1),
+                            "robot_m2": round(map_check.robot_m2, 1), "free_share": round(map_check.free_share, 3),
+                            "scanned_m2": None if map_check.scanned_m2 is None else round(map_check.scanned_m2, 1),
+                            "thresholds": map_check.thresholds, "warnings": list(map_check.warnings)}
+    if reference is not None:
+        summary["reference"] = _reference_section(args.reference, res, reference)
+        summary["reference"]["label"] = getattr(args, "_reference_label", None)
     if args.animate:
         t_anim = time.perf_counter()
         files = write_animation(dest.stage, grid, res, log.poses, n_particles=settings.particles)
@@ -632,6 +796,42 @@ def _run(args, inputs: Inputs, settings: RunSettings, amcl: dict | None, out: Te
             print(f"removed {', '.join(p.name for p in removed)} of an earlier run from {args.out}", file=out)
         print(_report(summary, len(log), written, args.smooth), file=out)
     return 0
+
+
+def _reference(args, log) -> tuple[NDArray | None, str | None]:
+    """``--reference FILE`` matched to the log's scans (None without it), and how the report names it."""
+    if getattr(args, "reference", None) is None:
+        return None, ("the log's poses" if log.poses is not None else None)
+    from .pipeline import match_reference, read_reference
+
+    t, poses = read_reference(args.reference)
+    return match_reference(t, poses, log.times, where=f"--reference {args.reference}"), Path(args.reference).name
+
+
+def _reference_section(path: Path, res: RunResult, reference: NDArray) -> dict:
+    """``summary.json``'s ``reference`` section: the file, the scans it covers, the error while localized."""
+    err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
+    ok = np.isfinite(err)
+    loc = ok & (np.asarray(res.state) == "localized") if res.state is not None else ok
+    return {"file": str(path), "scans_matched": int(ok.sum()),
+            "median_error_m": round(float(np.median(err[ok])), 4),
+            "median_error_while_localized_m": round(float(np.median(err[loc])), 4) if loc.any() else None,
+            "final_error_m": None if not ok[-1] else round(float(err[-1]), 4)}
+
+
+def headline_short(res: RunResult) -> str:
+    """The report's title: the final state and the first localized scan.
+
+    >>> from types import SimpleNamespace
+    >>> headline_short(SimpleNamespace(state=np.array(["searching", "localized", "localized"])))
+    'localized from scan 1, final state localized'
+    """
+    state = np.asarray(res.state) if res.state is not None else None
+    if state is None:
+        return "no state"
+    loc = np.flatnonzero(state == "localized")
+    first = f"localized from scan {loc[0]}" if loc.size else "never localized"
+    return f"{first}, final state {state[-1]}"
 
 
 def _settings_section(args, settings: RunSettings, log, map_desc: str, amcl: dict | None, is_bag: bool) -> dict:
@@ -660,10 +860,13 @@ def _report(summary: dict, n_scans: int, written: list[Path], smooth: bool) -> s
     """The terminal's account of a run: speed, state, passes, odometry, errors, files."""
     rtf = summary["real_time_factor"]
     lines = [
-        f"{n_scans} scans, {summary['particles']} particles, {summary['seconds_per_scan'] * 1000:.1f} ms per scan"
-        + (f", {rtf:g}x real time" if rtf else ""),
+        f"{n_scans} scans, {summary['particles']} particles, {summary['seconds_per_scan'] * 1000:.2g} ms per scan"
+        + (f", {_times(rtf)} real time" if rtf else ""),
         headline(summary),
     ]
+    if (summary.get("state") or {}).get("lost_intervals"):
+        lines.append("  (lost: the filter had been localized, then the scans stopped fitting the map at its estimate; "
+                     "it searches again)")
     if smooth:
         from .smooth import headline as smooth_headline
         lines.append(smooth_headline(summary["smooth"]))
@@ -673,10 +876,30 @@ def _report(summary: dict, n_scans: int, written: list[Path], smooth: bool) -> s
                      "were driven backwards (the odometry reports no reversing; --odometry-sign trust keeps it)")
     if summary.get("median_error_while_localized_m") is not None:
         lines.append(f"against the log's reference poses, while localized: median error "
-                     f"{summary['median_error_while_localized_m']} m, 90% {summary['p90_error_while_localized_m']} m"
-                     f" ({summary['localized_scans_over_1m_off']} localized scans more than 1 m off)")
+                     f"{summary['median_error_while_localized_m']:.2f} m, 90% "
+                     f"{summary['p90_error_while_localized_m']:.2f} m ({summary['localized_scans_over_1m_off']} "
+                     "localized scans more than 1 m off)")
+    ref = summary.get("reference")
+    if ref and ref.get("median_error_while_localized_m") is not None:
+        lines.append(f"against {ref.get('label') or Path(ref['file']).name}: median error {ref['median_error_while_localized_m']:.2f} m "
+                     "while localized" + (f", final error {ref['final_error_m']:.2f} m"
+                                          if ref.get("final_error_m") is not None else ""))
+    lines += advice(summary)
+    fp = summary.get("final_pose")
+    if fp:
+        lines.append(f"final pose: x {fp['x']:.2f} m, y {fp['y']:.2f} m, yaw {fp['theta']:.3f} rad "
+                     f"(std {fp['std'][0]:.2f} m, {fp['std'][1]:.2f} m, {fp['std'][2]:.3f} rad; {fp['state']})")
     lines.append(f"wrote {', '.join(str(p) for p in written)}")
     return "\n".join(lines)
+
+
+def _times(factor: float) -> str:
+    """A real-time factor at the precision a loaded machine's timing supports (two significant figures).
+
+    >>> _times(201.444), _times(26.548), _times(3.42)
+    ('200x', '27x', '3.4x')
+    """
+    return f"{float(f'{factor:.2g}'):g}x"
 
 
 def _cmd_demo(args, out: TextIO, err: TextIO) -> int:
@@ -705,23 +928,22 @@ def _cmd_demo(args, out: TextIO, err: TextIO) -> int:
     with RunOutput(args.out, results=(*DEMO_FILES, *RESULT_FILES), before_commit=add_score) as dest:
         dest.open()  # the lock first: a refused or interrupted demo leaves --out as it was
         d = make_demo(dest.stage, rng, steps=args.steps)
-        argv = ["run", "--map", str(d.map_path), "--log", str(d.log_path), "--out", str(args.out),
+        argv = ["run", "--map", str(d.map_path), "--log", str(d.log_path), "--reference", str(d.truth_path),
+                "--out", str(args.out),
                 "--particles", str(args.particles), "--seed", str(args.seed), "--frames", str(args.frames)]
         argv += ([] if args.no_animate else ["--animate"]) + (["--quiet"] if quiet else [])
-        shown = [str(args.out / Path(a).name) if a in (str(d.map_path), str(d.log_path)) else a for a in argv]
+        staged = (str(d.map_path), str(d.log_path), str(d.truth_path))
+        shown = [str(args.out / Path(a).name) if a in staged else a for a in argv]
         if not quiet:
             print(f"simulated {args.steps} scans of a robot in the built-in office (map with a moved cupboard, walls "
                   f"drawn at another resolution, unmapped clutter): {', '.join(DEMO_FILES)}", file=out)
             print("localizing: localize " + " ".join(shown), file=out)
         run_args = build_parser().parse_args(argv)
         run_args._argv = shown
+        run_args._reference_label = "the true poses"
         settings, amcl = _run_settings(run_args, out, err)
         code = _run(run_args, _inputs(run_args), settings, amcl, out, err, dest)
     if not quiet:
-        cs, med = score["convergence_step_truth"], score["median_error_after_convergence_m"]
-        print(f"against the true poses: within 0.5 m from scan {cs}" + (f", median error {med} m after that"
-                                                                           if med is not None else "")
-              + f", final error {score['final_error_m']} m", file=out)
         print(f"compare with evo: evo_ape tum {args.out / 'truth.tum'} {args.out / 'trajectory.tum'}", file=out)
     return code
 

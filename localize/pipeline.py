@@ -48,7 +48,8 @@ from .settings import DEFAULTS, LEGACY_NAMES, RunSettings
 
 __all__ = ["RunResult", "localize_log", "make_sensor", "check_log_odometry", "auto_particles", "resolve_particles",
            "converged_at", "kld_sampling", "augmented_filter", "settings_with", "read_log_file", "read_map_file",
-           "read_inputs", "Inputs", "check_free_space", "map_summary", "AUTO_PARTICLES", "ODOMETRY_SIGN"]
+           "read_inputs", "Inputs", "check_free_space", "map_summary", "AUTO_PARTICLES", "ODOMETRY_SIGN",
+           "read_reference", "match_reference", "MapCheck", "check_map", "particles_for_area", "scanned_area"]
 
 
 # ============================================================================ particles
@@ -217,7 +218,9 @@ class RunResult:
     the other attributes are read from it: ``estimates`` (its ``poses``), ``spread`` (the position spread
     of *all* particles, ``hypot(std_x, std_y)``), ``n_eff``, ``updated``, ``seconds``, ``snapshots``,
     ``state`` (``searching``, ``localized`` or ``lost``, see :class:`localize.policies.StateRules`) and
-    ``covariances`` (``(K, 3, 3)``, the particles' variances on the diagonal, for the result bag).
+    ``covariances`` (``(K, 3, 3)``: the weighted covariance of the best cluster per scan, the trace's ``cov``;
+    for a trace without one, the variances of all particles on the diagonal). ``snapshots`` always hold
+    the last scan's particles (the report's final cloud).
     """
 
     times: NDArray[np.float64]
@@ -234,6 +237,9 @@ class RunResult:
 
     @property
     def covariances(self) -> NDArray[np.float64]:
+        cov = getattr(self.trace, "cov", None)
+        if cov is not None:
+            return np.asarray(cov, dtype=float)
         covs = np.zeros((len(self.trace), 3, 3))
         covs[:, [0, 1, 2], [0, 1, 2]] = self.trace.stds ** 2
         return covs
@@ -346,14 +352,18 @@ def localize_log(grid: OccupancyGrid, log, settings: RunSettings | None = None, 
                                 kld=kld_sampling(s, n_particles), unknown_allowed=s.unknown_allowed,
                                 unknown_penalty=s.unknown_penalty, min_ess=s.min_ess,
                                 occupied_penalty=s.occupied_penalty)
-    if not s.track:
+    if s.initial_pose is not None:  # a known start (--initial-pose, AMCL's initial_pose_*)
+        _check_initial_pose(grid, s)
+        f = MCL.gaussian(np.asarray(s.initial_pose, dtype=float), tuple(s.initial_std), n_particles, motion, model,
+                         rng=rng, grid=grid, **opts)
+    elif not s.track:
         f = MCL.uniform(grid, n_particles, motion, model, rng=rng, **opts)
     else:
         if log.poses is None:
             raise ValueError("init='reference' (track) needs reference poses in the log (log.poses is None)")
         f = MCL.gaussian(log.poses[0], tuple(s.init_std), n_particles, motion, model, rng=rng, grid=grid, **opts)
     k_scans = len(log)
-    snap_steps: Sequence[int] = ()
+    snap_steps: Sequence[int] = [k_scans - 1]  # the last scan's cloud, always (the report's final particles)
     if snapshot_every:
         snap_steps = sorted(set(range(0, k_scans, snapshot_every)) | {k_scans - 1})
     odo = log.odometry
@@ -365,6 +375,17 @@ def localize_log(grid: OccupancyGrid, log, settings: RunSettings | None = None, 
                     skip_unknown_beams=s.unknown_beams == "skip", skip_short_beams=s.skip_short_beams,
                     callback=None if progress is None else progress.update_to)
     return RunResult(times=np.asarray(log.times), trace=tr, odometry_check=sign_check)
+
+
+def _check_initial_pose(grid: OccupancyGrid, s: RunSettings) -> None:
+    """ValueError if ``s.initial_pose`` lies off the map, or comes with ``track``."""
+    if s.track:
+        raise ValueError("give either --track (the log's first reference pose) or --initial-pose, not both")
+    x, y = s.initial_pose[0], s.initial_pose[1]
+    if not grid.contains(np.array([[x, y]]))[0]:
+        x0, y0 = grid.origin
+        raise ValueError(f"--initial-pose {x:g} {y:g}: outside the map ({x0:g} to {x0 + grid.width_m:g} m in x, "
+                         f"{y0:g} to {y0 + grid.height_m:g} m in y); give the pose in the map's frame")
 
 
 def _sensor_params(s: RunSettings) -> dict[str, Any]:
@@ -521,6 +542,276 @@ def read_inputs(inputs: Inputs, min_range: float | None = None, warn: Callable[[
         desc = str(inputs.map)
     check_free_space(grid, desc)
     return log, grid, desc
+
+
+def _read_reference_csv(p: Path) -> tuple[NDArray, NDArray]:
+    """``(times, poses)`` of a CSV file with columns time, x, y, theta (a header naming them, or none)."""
+    from .io._common import FormatError
+
+    rows, cols = [], None
+    for n, line in enumerate(p.read_text().splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        f = [v.strip() for v in s.split(",")]
+        if cols is None and not rows:
+            try:
+                float(f[0])
+            except ValueError:
+                names = [v.lower() for v in f]
+                missing = [c for c in ("time", "x", "y", "theta") if c not in names]
+                if missing:
+                    raise FormatError(p, n, f"the header names no column {', '.join(missing)}; expected "
+                                            "time,x,y,theta") from None
+                cols = [names.index(c) for c in ("time", "x", "y", "theta")]
+                continue
+        idx = cols or [0, 1, 2, 3]
+        if len(f) <= max(idx):
+            raise FormatError(p, n, f"expected time,x,y,theta; got {len(f)} field(s)")
+        try:
+            rows.append([float(f[i]) for i in idx])
+        except ValueError:
+            raise FormatError(p, n, f"expected numbers (time,x,y,theta); got {s[:60]!r}") from None
+        if not np.all(np.isfinite(rows[-1])):
+            raise FormatError(p, n, f"expected finite numbers; got {s[:60]!r}")
+    if not rows:
+        raise FormatError(p, None, "the file holds no poses (expected CSV time,x,y,theta or TUM)")
+    a = np.array(rows)
+    return a[:, 0], a[:, 1:4]
+
+
+def read_reference(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(times, poses)`` of a reference trajectory file: TUM, or CSV with columns time, x, y, theta.
+
+    The format is read from the content: lines of eight space-separated numbers
+    are TUM (:func:`localize.io.tum.read_tum`), comma-separated lines CSV (a
+    header naming ``time,x,y,theta`` is optional; a ``trajectory.csv`` of an
+    earlier run qualifies). Times must not decrease.
+
+    Examples
+    --------
+    >>> p = tmp_dir() / "ref.csv"
+    >>> _ = p.write_text("time,x,y,theta\\n0.0,1,2,0\\n1.0,2,2,0.5\\n")
+    >>> t, poses = read_reference(p)
+    >>> t.tolist(), poses[1].tolist()
+    ([0.0, 1.0], [2.0, 2.0, 0.5])
+    >>> _ = p.write_text("time,x,y\\n0.0,1,2\\n")
+    >>> read_reference(p)
+    Traceback (most recent call last):
+    ...
+    localize.io._common.FormatError: ...ref.csv:1: the header names no column theta; expected time,x,y,theta
+    """
+    from .io._common import FormatError
+    from .io.tum import read_tum
+
+    p = Path(path)
+    if not p.is_file():
+        raise FormatError(p, None, "no such file (--reference: a TUM file or a CSV with time,x,y,theta)")
+    first = next((ln.strip() for ln in p.read_text().splitlines() if ln.strip() and not ln.startswith("#")), "")
+    if "," not in first and len(first.split()) == 8:
+        t, poses = read_tum(p)
+    else:
+        t, poses = _read_reference_csv(p)
+    if np.any(np.diff(t) < 0):
+        k = int(np.flatnonzero(np.diff(t) < 0)[0])
+        raise FormatError(p, None, f"the times go back (pose {k + 2}: {t[k + 1]:g} after {t[k]:g}); sort the file")
+    return t, poses
+
+
+def match_reference(ref_times: ArrayLike, ref_poses: ArrayLike, times: ArrayLike, max_gap: float = 0.5,
+                    where: str = "the reference") -> NDArray[np.float64]:
+    """The reference pose at each of ``times``: interpolated between the two nearest reference poses.
+
+    A scan more than ``max_gap`` seconds from every reference pose gets NaN
+    (no reference there); headings are interpolated on the circle. Raises a
+    ValueError when no scan gets a reference (the files cover different times).
+
+    Examples
+    --------
+    >>> match_reference([0.0, 1.0], [[0, 0, 3.0], [1, 0, -2.9]], [0.5, 5.0]).round(3).tolist()
+    [[0.5, 0.0, -3.092], [nan, nan, nan]]
+    """
+    rt = np.asarray(ref_times, dtype=float)
+    rp = np.asarray(ref_poses, dtype=float).reshape(-1, 3)
+    t = np.asarray(times, dtype=float)
+    out = np.full((t.size, 3), np.nan)
+    j = np.clip(np.searchsorted(rt, t), 1, max(rt.size - 1, 1))
+    i = j - 1
+    if rt.size == 1:
+        i = j = np.zeros(t.size, dtype=int)
+    gap_i, gap_j = np.abs(t - rt[i]), np.abs(rt[j] - t)
+    span = rt[j] - rt[i]
+    inside = (t >= rt[i]) & (t <= rt[j]) & (span > 0) & (np.minimum(gap_i, gap_j) <= max_gap)
+    u = np.where(span > 0, (t - rt[i]) / np.where(span > 0, span, 1.0), 0.0)
+    dth = np.angle(np.exp(1j * (rp[j, 2] - rp[i, 2])))
+    interp = np.column_stack([rp[i, :2] + u[:, None] * (rp[j, :2] - rp[i, :2]),
+                              np.angle(np.exp(1j * (rp[i, 2] + u * dth)))])
+    out[inside] = interp[inside]
+    near = np.where(gap_i <= gap_j, i, j)
+    exact = ~inside & (np.abs(t - rt[near]) <= max_gap)
+    out[exact] = rp[near[exact]]
+    if not np.isfinite(out[:, 0]).any():
+        raise ValueError(f"{where}: its times ({rt[0]:g} to {rt[-1]:g} s) match none of the log's scans "
+                         f"({t[0]:g} to {t[-1]:g} s, within {max_gap:g} s); give a reference of this log, "
+                         "in the log's clock")
+    return out
+
+
+@dataclass(frozen=True)
+class MapCheck:
+    """What :func:`check_map` found: the free area, where it lies, what the thresholds did; ``warnings`` (text).
+
+    ``free_m2`` is the map's free area, ``outside_m2`` the part of it connected
+    to the map's edge (a building drawn with walls all round has none: free
+    space reaching the edge is the outside, or a map cut off), ``robot_m2``
+    the area the robot can be in (``free_m2``, less what a flagged map reads as
+    free wrongly), ``free_share`` the free share of the map's cells,
+    ``scanned_m2`` the area the scans cover (with a log).
+    """
+
+    free_m2: float
+    outside_m2: float
+    robot_m2: float
+    free_share: float
+    warnings: tuple[str, ...] = ()
+    thresholds: str | None = None
+    scanned_m2: float | None = None
+
+
+def particles_for_area(area_m2: float) -> int:
+    """``--particles auto`` for ``area_m2`` of free space: one per 0.5 m x 0.5 m x 10 degree bin, within
+    :data:`AUTO_PARTICLES` (as :func:`auto_particles` does for a whole map).
+
+    >>> particles_for_area(204.0), particles_for_area(1.0)
+    (29376, 20000)
+    """
+    lo, hi = AUTO_PARTICLES
+    return int(min(max(round(area_m2 / 0.25 * 36), lo), hi))
+
+
+def _ros_thresholds(path: Path | None) -> tuple[str, float, int] | None:
+    """For a map_server map whose free_thresh makes map_saver's unknown grey (205) free: what that did, the
+    grey's share of the image, and the number of pixels free under map_server's default free_thresh 0.196."""
+    from .io import read_pgm
+    from .io.ros import parse_map_yaml
+
+    if path is None or Path(path).suffix.lower() not in (".yaml", ".yml"):
+        return None
+    try:
+        y = parse_map_yaml(path)
+        img_name = str(y["image"][0])
+        img = read_pgm((Path(path).parent / img_name) if not Path(img_name).is_absolute() else img_name)
+    except (ValueError, KeyError, OSError):
+        return None
+    free_t = float(y.get("free_thresh", (0.196, 0))[0])
+    negate = bool(y.get("negate", (0, 0))[0])
+    grey = 205
+    occ = (img / 255.0) if negate else (255.0 - img) / 255.0
+    p = grey / 255 if negate else (255 - grey) / 255
+    if p >= free_t or img.ndim != 2:
+        return None
+    share = float(np.mean(img == grey))
+    return (f"free_thresh {free_t:g} makes map_saver's 'unknown' grey ({grey}, occupancy {p:.3f}) free: "
+            f"{share:.0%} of the image is that grey", share, int(np.sum(occ < 0.196)))
+
+
+def scanned_area(log, cell: float = 0.25, max_scans: int = 400, max_range: float | None = None) -> float:
+    """The area (m^2) the log's scans cover: the union of the scans' polygons (end points clipped to
+    ``max_range``, "no return" beams at it) placed at the log's reference poses, else its odometry, rasterised
+    at ``cell`` metres; at most ``max_scans`` evenly spread scans. Odometry drift smears the union, so the
+    area is if anything too large.
+
+    Examples
+    --------
+    >>> from localize.io import LaserLog
+    >>> ang = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    >>> log = LaserLog(times=[0.0], odometry=[[0.0, 0.0, 0.0]], ranges=np.full((1, 360), 2.0), angles=ang,
+    ...                max_range=10.0)
+    >>> a = scanned_area(log, cell=0.05)         # a disc of radius 2 m: 12.57 m^2, plus the boundary cells
+    >>> bool(np.pi * 4 < a < np.pi * 2.05 ** 2)
+    True
+    """
+    from PIL import Image, ImageDraw
+
+    poses = np.asarray(log.poses if log.poses is not None else log.odometry, dtype=float)
+    mr = float(log.max_range if max_range is None else min(max_range, log.max_range))
+    idx = np.unique(np.linspace(0, len(poses) - 1, min(len(poses), max_scans)).astype(int))
+    r = np.minimum(np.nan_to_num(np.asarray(log.ranges, dtype=float)[idx], nan=mr, posinf=mr), mr)
+    a = np.asarray(log.angles, dtype=float)
+    ang = poses[idx, 2:3] + a[None, :]
+    xs = poses[idx, 0:1] + r * np.cos(ang)
+    ys = poses[idx, 1:2] + r * np.sin(ang)
+    x0, y0 = min(xs.min(), poses[idx, 0].min()), min(ys.min(), poses[idx, 1].min())
+    w = int(np.ceil((max(xs.max(), poses[idx, 0].max()) - x0) / cell)) + 2
+    h = int(np.ceil((max(ys.max(), poses[idx, 1].max()) - y0) / cell)) + 2
+    img = Image.new("1", (w, h), 0)
+    draw = ImageDraw.Draw(img)
+    for k in range(len(idx)):
+        px = np.r_[poses[idx[k], 0], xs[k]]
+        py = np.r_[poses[idx[k], 1], ys[k]]
+        draw.polygon(list(zip(((px - x0) / cell).tolist(), ((py - y0) / cell).tolist())), fill=1)
+    return float(np.asarray(img).sum()) * cell * cell
+
+
+def check_map(grid: OccupancyGrid, map_path: Path | None = None, log=None,
+              max_range: float | None = None) -> MapCheck:
+    """Check that the map's free space is plausible for a robot's laser; warn (text) when it is not.
+
+    Two signs of a map whose unknown reads as free: for a ROS map, a
+    ``free_thresh`` above map_saver's unknown grey 205 (occupancy 0.196) with
+    more than 5% of the image that grey (the grey then counts as free); for
+    any map, more than half of the cells free *and* more than a quarter of
+    the free area connected to the map's edge (the outside of the building:
+    a floor drawn with walls all round has none). With a ``log``, a third
+    sign, reported but not acted on: free space more than 5 times the area the
+    scans cover (:func:`scanned_area`; a log that visits part of a building
+    also gives it). ``robot_m2``, the area the
+    robot can be in, leaves out what a flagged map reads as free wrongly (the
+    grey; the free space reaching the edge); the command line sizes
+    ``--particles auto`` from it. (A map cropped inside a building, like the
+    Willow Garage map, reaches its edge too, but is not mostly free.)
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> check_map(office()).warnings
+    ()
+    >>> open_field = OccupancyGrid(np.zeros((100, 100)), 0.1)          # everything free, to the edge
+    >>> c = check_map(open_field)
+    >>> c.free_share, c.outside_m2, len(c.warnings)
+    (1.0, 100.0, 1)
+    """
+    from scipy import ndimage
+
+    free = np.asarray(grid.free)
+    cell = float(grid.resolution) ** 2
+    free_m2 = float(free.sum()) * cell
+    labels, _ = ndimage.label(free)
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    edge = edge[edge > 0]
+    outside_m2 = float(np.isin(labels, edge).sum()) * cell if edge.size else 0.0
+    share = float(free.mean()) if free.size else 0.0
+    warns, robot_m2 = [], free_m2
+    ros = _ros_thresholds(map_path)
+    if ros is not None and ros[1] > 0.05:
+        robot_m2 = min(robot_m2, ros[2] * cell) if ros[2] > 0 else robot_m2
+        warns.append(f"{ros[0]}, {share:.0%} of the map's cells read free ({free_m2:.0f} m^2; {ros[2] * cell:.0f} "
+                     "m^2 with map_server's default free_thresh 0.196); set free_thresh: 0.196 in the YAML, or "
+                     "--not-free-is-occupied")
+    if share > 0.5 and outside_m2 > 0.25 * free_m2:
+        robot_m2 = min(robot_m2, free_m2 - outside_m2) if free_m2 > outside_m2 else robot_m2
+        warns.append(f"{share:.0%} of the map's cells are free and {outside_m2:.0f} m^2 of the {free_m2:.0f} m^2 "
+                     "of free space reach the map's edge: the outside of the building reads as free (is the "
+                     "unknown read as free?)")
+    seen = None
+    if log is not None and len(log):
+        seen = scanned_area(log, max_range=max_range)
+        if free_m2 > 5 * seen:
+            warns.append(f"the map has {free_m2:.0f} m^2 of free space, {free_m2 / max(seen, 1e-9):.0f} times the "
+                         f"{seen:.0f} m^2 the scans cover: the particles search all of it (a log of part of the "
+                         "building; else check the map's thresholds)")
+    return MapCheck(free_m2=free_m2, outside_m2=outside_m2, robot_m2=robot_m2, free_share=share,
+                    warnings=tuple(warns), thresholds=None if ros is None else ros[0], scanned_m2=seen)
 
 
 def map_summary(grid: OccupancyGrid) -> str:

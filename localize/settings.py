@@ -42,11 +42,12 @@ from ._checks import (
     check_count,
     check_interval,
     check_nonnegative,
+    check_number,
     check_positive,
     check_probability,
 )
 
-__all__ = ["RunSettings", "DEFAULTS", "LEGACY_NAMES", "describe", "add_arguments", "from_namespace", "parse_options",
+__all__ = ["RunSettings", "DEFAULTS", "LEGACY_NAMES", "describe", "explain", "CLI_GROUPS", "add_arguments", "from_namespace", "parse_options",
            "given_options",
            "with_amcl", "setting_names", "argparse_type", "check_particles", "jsonable"]
 
@@ -138,6 +139,10 @@ def _std3(value: Any, name: str) -> tuple[float, ...]:
     return _floats(value, name, 3, check_positive)
 
 
+def _pose3(value: Any, name: str) -> tuple[float, float, float]:
+    return _floats(value, name, 3, check_number)
+
+
 def _params(value: Any, name: str) -> dict:
     if not isinstance(value, Mapping):
         raise TypeError(f"{name} must be a dict of sensor model keyword arguments; got {type(value).__name__}")
@@ -149,7 +154,8 @@ def setting(default: Any, help: str, check: Callable[[Any, str], Any], *, unit: 
             aliases: tuple[str, ...] = (), cli_help: str | None = None) -> Any:
     """A :class:`RunSettings` field: default, one-line ``help``, ``check`` (a :mod:`localize._checks` helper),
     ``unit``, ``valid`` range (words), and how the command line shows it (``flag`` False: library only;
-    ``cli_help``: the ``--help`` paragraph, ``{default}`` replaced by the default).
+    ``cli_help``: the setting's longer explanation and rationale, ``{default}`` replaced by the default,
+    read by :func:`explain`; ``--help`` shows the one line of :data:`CLI_GROUPS` instead).
 
     >>> f = setting(0.5, "a threshold", check_probability, valid="[0, 1]")
     >>> f.default, f.metadata["valid"], f.metadata["flag"]
@@ -168,7 +174,8 @@ class RunSettings:
     """Every setting of a log run once: default, unit, range and help in each field's metadata.
 
     The first 22 fields are the filter options of ``localize run`` (``--particles`` ...
-    ``--odometry-sign``, in the order of ``--help``), then ``track`` (``--track``);
+    ``--odometry-sign``, in the order of ``--help``), then ``track`` (``--track``), ``initial_pose`` and
+    ``initial_std`` (``--initial-pose``, ``--initial-std``);
     the rest are library settings without a flag, which an AMCL parameter file or
     an experiment may set. Values are checked (and lists made tuples) when the
     object is made; see :func:`describe` for one setting's meaning.
@@ -345,6 +352,14 @@ class RunSettings:
         valid="True or False", cli_help="""
         pose tracking instead of global localization: start around the log's first reference pose (needs a
         corrected log).""")
+    initial_pose: tuple[float, float, float] | None = setting(
+        None, "a known start: particles drawn around this pose (x, y in the map frame, yaw) instead of everywhere",
+        _optional(_pose3), unit="metres, metres, radians", valid="three numbers", metavar=("X", "Y", "YAW"), nargs=3,
+        cli_help="""start around this pose, map frame, metres and radians (default: none, global localization). Example: --initial-pose 2 3.5 1.57""")
+    initial_std: tuple[float, float, float] = setting(
+        (0.5, 0.5, 0.2618), "with initial_pose: standard deviations of the start's Gaussian (AMCL's defaults)",
+        _std3, unit="metres, metres, radians", valid="three numbers > 0", metavar=("SX", "SY", "SYAW"), nargs=3,
+        cli_help="""with --initial-pose: its standard deviations (default {default}, AMCL's initial_cov_*). Example: --initial-std 0.3 0.3 0.2""")
     # ---------------------------------------------------------------- library settings (no flag)
     init_std: tuple[float, float, float] = setting(
         (0.1, 0.1, 0.05), "with track: standard deviations of the prior around the first reference pose", _std3,
@@ -418,7 +433,7 @@ def setting_names(cli_only: bool = False) -> tuple[str, ...]:
     """The names of the settings (``cli_only``: those with a command-line flag).
 
     >>> setting_names(cli_only=True)[-3:]
-    ('occupied_penalty', 'odometry_sign', 'track')
+    ('track', 'initial_pose', 'initial_std')
     """
     return tuple(f.name for f in fields(RunSettings) if f.metadata["flag"] or not cli_only)
 
@@ -475,34 +490,101 @@ def _element_check(f: Any) -> Callable[[Any, str], Any]:
     """The check of one value of a setting that takes several on the command line."""
     if f.name == "alphas":
         return check_nonnegative
+    if f.name == "initial_pose":
+        return check_number
+    if f.name == "initial_std":
+        return check_positive
     return check_nonnegative if f.metadata["nargs"] else f.metadata["check"]
 
 
-def add_arguments(parser: Any) -> None:
-    """Add one option per setting with a flag to ``parser`` (an argparse parser or argument group).
+#: The ``localize run --help`` line of each setting with a flag: its group and its one-line meaning (the
+#: default is appended). The rationale behind each is :func:`explain`'s (and chapter 9's).
+CLI_GROUPS: dict[str, tuple[str, str]] = {
+    "particles": ("filter", "start cloud; auto: by free area"),
+    "sensor": ("sensor", "likelihood or beam"),
+    "beams": ("sensor", "beams used per scan"),
+    "max_range": ("sensor", "longest usable reading, m"),
+    "alphas": ("filter", "odometry noise"),
+    "sigma_hit": ("sensor", "reading's spread about the map, m"),
+    "z_short": ("sensor", "weight of short (unmapped) readings"),
+    "temper": ("sensor", "factor on a scan's log-likelihood"),
+    "min_motion": ("filter", "update after M m or RAD turned"),
+    "injection": ("recovery", "random particles per resampling"),
+    "min_range": ("sensor", "readings up to M m are ignored"),
+    "kld": ("filter", "KLD-sampling bound (0: fixed count)"),
+    "min_particles": ("filter", "with --kld: never fewer particles"),
+    "augmented": ("recovery", "augmented MCL rates (0 0: off)"),
+    "recovery_injection": ("recovery", "while lost: random particles"),
+    "restart_after": ("recovery", "search again after K misfits (0: no)"),
+    "min_ess": ("filter", "keep F*N effective particles (0: off)"),
+    "expand": ("recovery", "spread the cloud on misfit"),
+    "unknown_beams": ("sensor", "unknown-cell beams: skip, score"),
+    "skip_short_beams": ("sensor", "skip beams M m short of the map"),
+    "occupied_penalty": ("sensor", "penalty of a particle in a wall"),
+    "odometry_sign": ("filter", "find reversing: auto, check, trust"),
+    "track": ("filter", "start at the log's first true pose"),
+    "initial_pose": ("filter", "start around this pose, m and rad"),
+    "initial_std": ("filter", "--initial-pose's spread"),
+}
+
+
+def explain(name: str) -> str:
+    """A setting's longer explanation: what it does and why its default (what ``--help`` leaves out).
+
+    >>> explain("temper").endswith("so 30 beams are not 30 independent measurements, and an over-confident "
+    ...                            "filter locks onto a wrong place.")
+    True
+    """
+    by_name = {f.name: f for f in fields(RunSettings)}
+    if name not in by_name:
+        raise ValueError(f"no setting {name!r}; the settings are {', '.join(by_name)}")
+    f = by_name[name]
+    text = " ".join(f.metadata["cli_help"].split()).format(default=_shown(f.default))
+    return text.split(" Example: ")[0].rstrip()
+
+
+def _default_text(f: Any) -> str:
+    if isinstance(f.default, bool):
+        return "default off"
+    if f.default is None:
+        return "default none"
+    return f"default {_shown(f.default)}"
+
+
+def add_arguments(parser: Any, groups: Mapping[str, Any] | None = None) -> None:
+    """Add one option per setting with a flag to ``parser`` (an argparse parser or argument group), or to
+    ``groups[name]`` by the setting's group in :data:`CLI_GROUPS` (sensor, filter, recovery).
 
     The option's destination is the setting's name; its default is the setting's
-    default, ``{default}`` in the help replaced by it; old flags (``--recovery``,
-    ``--short-beams``) are aliases.
+    default, and its help the one line of :data:`CLI_GROUPS` with the default;
+    old flags (``--recovery``, ``--short-beams``) are aliases (not listed).
 
     >>> ap = argparse.ArgumentParser()
     >>> add_arguments(ap)
     >>> ap.parse_args(["--short-beams", "0"]).skip_short_beams
     0.0
+    >>> "--short-beams" in ap.format_help(), "(default 1)" in ap.format_help()
+    (False, True)
     """
     for f in fields(RunSettings):
         m = f.metadata
         if not m["flag"]:
             continue
-        text = " ".join(m["cli_help"].split()).format(default=_shown(f.default))
-        names = ["--" + f.name.replace("_", "-"), *m["aliases"]]
+        group, brief = CLI_GROUPS.get(f.name, ("filter", m["help"]))
+        target = parser if groups is None else groups[group]
+        text = f"{brief} ({_default_text(f)})"
+        names = ["--" + f.name.replace("_", "-")]
         if isinstance(f.default, bool):
-            parser.add_argument(*names, dest=f.name, action="store_true", help=text)
+            target.add_argument(*names, dest=f.name, action="store_true", help=text)
             continue
         kw: dict[str, Any] = {k: m[k] for k in ("nargs", "metavar", "choices") if m[k] is not None}
         if m["choices"] is None:
             kw["type"] = argparse_type(_element_check(f), f.name)
-        parser.add_argument(*names, dest=f.name, default=f.default, help=text, **kw)
+        else:
+            kw.setdefault("metavar", "WHICH")  # the choices are in the help line
+        for alias in m["aliases"]:  # before the flag: the flag's action is the setting's last one
+            target.add_argument(alias, dest=f.name, default=f.default, help=argparse.SUPPRESS, **kw)
+        target.add_argument(*names, dest=f.name, default=f.default, help=text, **kw)
 
 
 def from_namespace(args: argparse.Namespace, **changes: Any) -> RunSettings:
@@ -594,4 +676,10 @@ def with_amcl(settings: RunSettings, amcl: Mapping[str, Any], given: set[str] = 
     if aug is not None:
         ch.update(augmented=(aug.alpha_slow, aug.alpha_fast), augmented_temperature=aug.temperature)
     ch["resample_threshold"] = amcl["resample_threshold"]
+    if amcl.get("initial_pose") is not None:  # AMCL's initial_pose_* / initial_cov_*: a known start
+        for n in ("initial_pose", "initial_std"):
+            if n in given:
+                kept.append(n)
+            else:
+                ch[n] = amcl[n]
     return replace(settings, **ch), kept

@@ -100,8 +100,7 @@ def test_the_command_line_and_the_library_say_the_same(name, capsys):
         dataclasses.replace(RunSettings(), **{name: value})
     library = str(lib.value)
     if n == 1:       # a list is checked as a whole in the library, value by value on the command line
-        shown = "/".join([flag, *f.metadata["aliases"]])                  # argparse names an option's aliases too
-        assert err == f"localize run: error: argument {shown}: expected " + library[len(name + " must be "):]
+        assert err == f"localize run: error: argument {flag}: expected " + library[len(name + " must be "):]
     else:
         assert err.startswith(f"localize run: error: argument {flag}: expected a finite number >= 0")
         assert name in library

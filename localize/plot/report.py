@@ -42,6 +42,20 @@ def _state_runs(state: np.ndarray) -> list[tuple[int, int, str]]:
     return out
 
 
+def _draw_final_cloud(ax: Any, trace: Any, last: int, max_particles: int) -> None:
+    """The particles of the last step's snapshot (at most ``max_particles``), labelled with how many the filter had."""
+    if last not in getattr(trace, "snapshots", {}):
+        return
+    parts, w = trace.snapshots[last]
+    sub = slice(None) if len(parts) <= max_particles else np.linspace(0, len(parts) - 1, max_particles).astype(int)
+    n_all = getattr(trace, "n_particles", None)
+    n_all = int(n_all[last]) if n_all is not None and len(n_all) > last else len(parts)
+    shown = min(len(parts), max_particles)
+    label = f"final particles ({n_all:,})" if shown >= n_all else f"final particles ({shown:,} of {n_all:,})"
+    ax.scatter(parts[sub, 0], parts[sub, 1], s=2, color="tab:purple", alpha=0.35, linewidths=0, label=label,
+               zorder=2)
+
+
 def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None = None, *,
                   times: ArrayLike | None = None, title: str | None = None, max_particles: int = 3000) -> Figure:
     """The report picture of a run (see the module's docstring); returns the Figure.
@@ -91,11 +105,7 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1.35, 1.0]})
     draw_map(grid, ax=ax)
     last = len(poses) - 1
-    if last in getattr(trace, "snapshots", {}):
-        parts, w = trace.snapshots[last]
-        sub = slice(None) if len(parts) <= max_particles else np.linspace(0, len(parts) - 1, max_particles).astype(int)
-        ax.scatter(parts[sub, 0], parts[sub, 1], s=2, color="tab:purple", alpha=0.35, linewidths=0,
-                   label=f"final particles ({len(parts):,})", zorder=2)
+    _draw_final_cloud(ax, trace, last, max_particles)
     if ref is not None:
         ax.plot(ref[:, 0], ref[:, 1], color="k", lw=1.0, alpha=0.6, label="reference", zorder=3)
     ax.plot(poses[:, 0], poses[:, 1], color="0.4", lw=0.6, alpha=0.7, zorder=3)
@@ -107,7 +117,9 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     ax.plot(*poses[-1, :2], marker="s", ms=9, mfc="none", mec="k", mew=1.5, ls="none", label="end", zorder=5)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    leg = ax.legend(loc="lower left", bbox_to_anchor=(0.01, 0.0), bbox_transform=fig.transFigure, ncol=4, fontsize=8,
+                    frameon=False)  # below the panels, off the map (the layout leaves the figure's bottom free)
+    leg.set_in_layout(False)
     ax.set_title("trajectory over the map, coloured by state")
 
     if ref is not None:
@@ -117,7 +129,9 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     else:
         ax2.plot(t, np.asarray(trace.spread, dtype=float), color="k", lw=1.2, label="spread of the best cluster (m)")
         ax2.set_ylabel("spread of the best cluster (m)")
-    ax2.set_yscale("log")
+    shown = np.asarray(ax2.lines[0].get_ydata(), dtype=float)
+    if np.any(np.isfinite(shown) & (shown > 0)):  # log scale needs a positive value (a run of 3 particles may not)
+        ax2.set_yscale("log")
     for a, b, name in _state_runs(state):
         lo = t[a] - (0.5 if times is None else 0.0)
         hi = t[b] + (0.5 if times is None else 0.0)
@@ -129,5 +143,5 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
     ax2.set_title("error" if ref is not None else "spread", loc="left")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.09, 1, 1))
     return fig
