@@ -57,7 +57,7 @@ def test_interrupted_animation_leaves_the_earlier_run_untouched(files, tmp_path,
     out = tmp_path / "o"
     assert small(files, out, "--seed", 1)[0] == 0
     before = {n: (out / n).read_bytes() for n in listing(out)}
-    assert set(before) == {"trajectory.csv", "trajectory.tum", "summary.json"}
+    assert set(before) == {"trajectory.csv", "trajectory.tum", "report.png", "summary.json"}
 
     def interrupted(folder, *args, **kwargs):
         (Path(folder) / "particles.gif").write_bytes(b"GIF89a half a frame")
@@ -117,10 +117,11 @@ def test_results_of_an_earlier_run_that_this_run_does_not_produce_are_removed(fi
     assert "particles.gif" in listing(out)
     status, text, err = small(files, out)
     assert status == 0, err
-    assert listing(out) == ["summary.json", "trajectory.csv", "trajectory.tum"]
+    assert listing(out) == ["report.png", "summary.json", "trajectory.csv", "trajectory.tum"]
     assert f"removed particles.gif of an earlier run from {out}" in text
     assert "animation" not in json.loads((out / "summary.json").read_text())
-    assert json.loads((out / "summary.json").read_text())["files"] == ["trajectory.csv", "trajectory.tum", "summary.json"]
+    assert json.loads((out / "summary.json").read_text())["files"] == ["trajectory.csv", "trajectory.tum", "report.png",
+                                                                          "summary.json"]
 
 
 def test_a_second_run_on_a_folder_being_written_is_refused(files, tmp_path):
@@ -131,7 +132,7 @@ def test_a_second_run_on_a_folder_being_written_is_refused(files, tmp_path):
         assert status == 2
         assert f"--out {out}: another run (pid " in err and "is writing this folder" in err
     assert small(files, out)[0] == 0  # free again once the first run is done
-    assert listing(out) == ["summary.json", "trajectory.csv", "trajectory.tum"]  # no lock file or staging folder left
+    assert listing(out) == ["report.png", "summary.json", "trajectory.csv", "trajectory.tum"]  # no lock or staging left
 
 
 def test_the_lock_holds_across_processes_and_dies_with_its_holder(files, tmp_path):

@@ -63,6 +63,8 @@ WIDGETS = {
                           "w.children[2]", 0.3),
     "ch9 tuning_widget": ("from localize.widgets.tuning import tuning_widget\nw = tuning_widget()",
                           "w.children[1]", 0.3),
+    "ch9 reallog_widget": ("from localize.widgets.reallog import reallog_widget\nw = reallog_widget()",
+                           "w.children[0]", 10),
     "ch10 noise_widget": ("from localize.widgets.ekf import noise_widget\nw = noise_widget(n_particles=100)",
                           "w.children[0].children[2]", 3),
 }
