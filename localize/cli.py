@@ -258,7 +258,10 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
         "log_duration_s": round(dt, 3) if reliable else None,
         "real_time_factor": round(dt / res.seconds, 3) if reliable and res.seconds > 0 else None,
         "convergence_threshold_m": threshold,
-        "convergence_step": converged_at(res.spread, threshold, hold),
+        # the spread of a cloud that never said "localized" (a one-cell map, a featureless corridor) is no
+        # convergence: only a filter whose state became localized reports one
+        "convergence_step": (converged_at(res.spread, threshold, hold)
+                             if res.trace is None or res.trace.first_localized() is not None else None),
         "convergence_criterion": (f"first scan from which the particles' position spread (or, for *_reference, "
                                   f"the error) stays below the threshold for {hold} scans"),
         "final_estimate": [round(float(v), 4) for v in res.estimates[-1]],
@@ -989,11 +992,13 @@ def main(argv: Sequence[str] | None = None, stdout: TextIO | None = None, stderr
     """
     out = sys.stdout if stdout is None else stdout
     err = sys.stderr if stderr is None else stderr
-    parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = build_parser().parse_args(argv)
     except SystemExit as e:  # argparse already printed usage / help
         return int(e.code or 0)
+    except KeyboardInterrupt:
+        print("localize: interrupted; nothing written", file=err)
+        return 130
     args._argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if args.command == "map":
@@ -1010,6 +1015,10 @@ def main(argv: Sequence[str] | None = None, stdout: TextIO | None = None, stderr
         print("localize: interrupted" + (f"; {e.output_note}" if getattr(e, "output_note", None) else ""),
               file=err)
         return 130
+    except MemoryError:  # the memory check's estimate was too low for this machine
+        print("localize: error: out of memory: use fewer --particles or --beams (the run's estimate of its own "
+              "needs was too low here; nothing written)", file=err)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -397,6 +397,10 @@ class RunSettings:
     def __post_init__(self) -> None:
         for f in fields(self):
             object.__setattr__(self, f.name, f.metadata["check"](getattr(self, f.name), f.name))
+        lo, hi = self.min_range, self.max_range
+        if lo is not None and hi is not None and not lo < hi:
+            raise ValueError(f"min_range (--min-range) {lo:g} m must be below max_range (--max-range) {hi:g} m: "
+                             "readings between the two are the scan's evidence")
 
     def summary(self) -> dict:
         """The command-line settings (flag order) as ``summary.json`` lists them: tuples as lists.

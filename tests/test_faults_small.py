@@ -77,3 +77,61 @@ def test_amcl_ranges_that_leave_no_valid_reading_are_named(tmp_path):
     p.write_text("amcl:\n  ros__parameters:\n    laser_min_range: 5.0\n    laser_max_range: 4.0\n")
     with pytest.raises(FormatError, match=r"amcl\.yaml:3: laser_min_range \(5\) must be below laser_max_range \(4\)"):
         amcl.read_amcl_params(p)
+
+
+# ------------------------------------------------------------------ the command line's own share of item 5
+def test_a_max_range_below_the_min_range_names_both_options(files, tmp_path):
+    status, _, err = run_cli("run", "--map", files[0], "--log", files[1], "--out", tmp_path / "o",
+                             "--max-range", "1e-9", "--quiet")
+    assert status == 2 and "--min-range" in err and "--max-range" in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_one_cell_map_reports_no_convergence_while_never_localized(files, tmp_path):
+    import json
+
+    from PIL import Image
+
+    Image.new("L", (1, 1), 254).save(tmp_path / "one.pgm")
+    (tmp_path / "one.yaml").write_text("image: one.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n"
+                                      "occupied_thresh: 0.65\nfree_thresh: 0.196\nnegate: 0\n")
+    status, text, err = run_cli("run", "--map", tmp_path / "one.yaml", "--log", files[1], "--out", tmp_path / "o",
+                                "--particles", "200")
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert status == 0 and "NOT localized" in text
+    assert summary["state"]["first_localized_scan"] is None and summary["convergence_step"] is None
+
+
+def test_ctrl_c_while_parsing_or_importing_gives_a_sentence_not_a_traceback(monkeypatch, capsys):
+    import importlib.abc
+    import sys
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "build_parser", interrupted)
+    status, _, err = run_cli("run", "--help")
+    assert status == 130 and err.strip() == "localize: interrupted; nothing written"
+
+    class Interrupt(importlib.abc.MetaPathFinder):       # Ctrl-C while localize.cli loads its libraries
+        def find_spec(self, name, path, target=None):
+            if name == "localize.cli":
+                raise KeyboardInterrupt
+            return None
+
+    monkeypatch.delitem(sys.modules, "localize.cli")
+    monkeypatch.setattr(sys, "meta_path", [Interrupt(), *sys.meta_path])
+    from localize.__main__ import main as console_main  # what python -m localize and the localize command run
+
+    assert console_main() == 130
+    assert capsys.readouterr().err.strip() == "localize: interrupted; nothing written"
+
+
+def test_an_allocation_that_fails_anyway_is_a_sentence(files, tmp_path, monkeypatch):
+    def no_memory(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(cli, "localize_log", no_memory)
+    status, _, err = run_cli("run", "--map", files[0], "--log", files[1], "--out", tmp_path / "o", "--quiet")
+    assert status == 2 and "out of memory" in err and "--particles" in err
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
