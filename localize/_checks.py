@@ -217,9 +217,10 @@ def check_angles(angles: ArrayLike, name: str = "angles") -> NDArray[np.float64]
 def check_grid(grid: Any, name: str = "grid"):
     """``grid`` itself if it is a :class:`localize.OccupancyGrid`, else ``TypeError``."""
     # by name: grid.py imports this module, and this one, imported by every layer, imports none of them
-    if not any(c.__name__ == "OccupancyGrid" and c.__module__ == "localize.grid" for c in type(grid).__mro__):
-        raise TypeError(f"{name} must be a localize.OccupancyGrid (see localize.maps); got {type(grid).__name__}")
-    return grid
+    for c in type(grid).__mro__:
+        if c.__name__ == "OccupancyGrid" and c.__module__ == "localize.grid":
+            return grid
+    raise TypeError(f"{name} must be a localize.OccupancyGrid (see localize.maps); got {type(grid).__name__}")
 
 
 def check_sensor_poses(poses: ArrayLike, name: str = "poses") -> NDArray[np.float64]:

@@ -269,7 +269,9 @@ class RunOutput:
         hook = sys.unraisablehook
 
         def unraisable(info):  # the swallowed Ctrl-C is remembered: no "Exception ignored" traceback
-            if not isinstance(info.exc_value, KeyboardInterrupt):
+            if isinstance(info.exc_value, KeyboardInterrupt):
+                self.interrupted = True  # raised in a finalizer (a generator closed, a weakref callback)
+            else:
                 hook(info)
 
         self._old_handler, self._old_hook = previous, hook

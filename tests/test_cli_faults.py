@@ -379,3 +379,26 @@ def test_any_option_value_is_accepted_or_rejected_naming_the_option(tmp_path, ca
     assert status == 2 and "Traceback" not in err
     assert f"argument {option}" in err or f"{missing}: no such file" in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_ctrl_c_raised_in_a_finalizer_without_a_signal_still_stops_the_results(files, tmp_path, monkeypatch):
+    """A KeyboardInterrupt that Python can only report as 'Exception ignored' (raised while a generator is
+    closed or an object finalized) is a Ctrl-C all the same: the run is not published."""
+    out = tmp_path / "o"
+    assert small(files, out, "--seed", 1)[0] == 0
+    before = {n: (out / n).read_bytes() for n in listing(out)}
+
+    class Finalizer:
+        def __del__(self):
+            raise KeyboardInterrupt  # swallowed by Python, seen by the unraisable hook
+
+    real = cli.write_summary
+
+    def summary_then_finalizer(path, summary):
+        Finalizer()
+        return real(path, summary)
+
+    monkeypatch.setattr(cli, "write_summary", summary_then_finalizer)
+    status, _, err = small(files, out, "--seed", 2)
+    assert status == 130 and "nothing written" in err
+    assert listing(out) == sorted(before) and all((out / n).read_bytes() == b for n, b in before.items())

@@ -44,14 +44,16 @@ def seed1(tmp_path):
     status, _, err = run_cli("demo", "--out", out, "--seed", 1, *SMALL)
     assert status == 0, err
     before = snapshot(out)
-    assert set(before) == {"map.dat", "robot.log", "truth.tum", "trajectory.csv", "trajectory.tum", "summary.json"}
+    assert set(before) == {"map.dat", "robot.log", "truth.tum", "trajectory.csv", "trajectory.tum", "report.png",
+                           "summary.json"}
     return out, before
 
 
 def test_the_demo_files_are_listed_in_the_summary_with_their_final_paths(seed1):
     out, _ = seed1
     s = json.loads((out / "summary.json").read_text())
-    assert s["files"] == ["map.dat", "robot.log", "truth.tum", "trajectory.csv", "trajectory.tum", "summary.json"]
+    assert s["files"] == ["map.dat", "robot.log", "truth.tum", "trajectory.csv", "trajectory.tum", "report.png",
+                          "summary.json"]
     assert s["settings"]["map"] == str(out / "map.dat") and s["settings"]["log"] == str(out / "robot.log")
     assert s["demo"]["truth"] == "truth.tum" and s["demo"]["final_error_m"] >= 0
 
