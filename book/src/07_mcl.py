@@ -319,7 +319,7 @@ plt.show()
 # %% [markdown]
 # ## Error versus time
 #
-# Position error (solid, log scale) and heading error (dotted) of the estimate:
+# Position error (solid, log scale) and heading error (grey, dotted, right axis) of the estimate:
 
 # %%
 ax = plot_errors(trace.poses, run.poses)

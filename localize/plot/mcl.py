@@ -227,9 +227,11 @@ def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLik
 
 def plot_errors(estimates: ArrayLike, truth: ArrayLike, ax=None, label: str | None = None,
                 kidnap_steps: Sequence[int] = (), heading: bool = True, **kwargs: Any):
-    """Error versus time: position error (m, left axis) and heading error (deg, right axis).
+    """Error versus time: position error (m, left axis, log scale) and heading error (deg, right axis).
 
-    Kidnapping steps are marked with vertical dotted lines. Returns the axes.
+    Errors below 1 mm are drawn at 1 mm (the bottom of the log axis). The
+    heading error is dotted, in grey, on its own axis. Kidnapping steps are
+    marked with vertical dotted lines. Returns the axes.
 
     Examples
     --------
@@ -237,33 +239,34 @@ def plot_errors(estimates: ArrayLike, truth: ArrayLike, ax=None, label: str | No
     >>> t = np.zeros((5, 3)); e = t + [0.1, 0.0, 0.05]
     >>> ax = plot_errors(e, t, kidnap_steps=[2])
     >>> ax.get_ylabel()
-    'position error [m]'
-    >>> [t.get_text() for t in ax.get_yticklabels()]     # no negative ticks on an error axis
-    ['0', '0.1', '1']
+    'position error [m] (log scale)'
+    >>> [t.get_text() for t in ax.get_yticklabels()]     # plain numbers, from 1 mm up
+    ['0.001', '0.01', '0.1', '1']
     >>> plt.close("all")
     """
     _, ax = new_axes(ax, figsize=(7, 3))
     pe = np.atleast_1d(position_error(estimates, truth))
     he = np.atleast_1d(heading_error(estimates, truth))
     steps = np.arange(len(pe))
-    (line,) = ax.plot(steps, pe, label=label or "position error", **kwargs)
+    floor = 1e-3
+    ax.plot(steps, np.maximum(pe, floor), label=label or "position error", **kwargs)
     if heading:
         ax2 = ax.twinx()
-        ax2.plot(steps, np.degrees(he), color=line.get_color(), ls=":", alpha=0.7)
-        ax2.set_ylabel("heading error [deg] (dotted)")
+        ax2.plot(steps, np.degrees(he), color="0.45", ls=":", lw=1.2)
+        ax2.set_ylabel("heading error [deg] (grey, dotted)", color="0.35")
+        ax2.set_ylim(bottom=0.0)
     for k in kidnap_steps:
         ax.axvline(k, color="k", ls=":", lw=1)
     ax.set_xlabel("step")
-    ax.set_ylabel("position error [m]")
-    # errors are >= 0: linear from 0 to 0.1 m, logarithmic above; no negative ticks, plain numbers
-    ax.set_yscale("symlog", linthresh=0.1)
+    ax.set_ylabel("position error [m] (log scale)")
+    ax.set_yscale("log")
     top = max(1.0, float(np.nanmax(pe)) * 1.5) if pe.size and np.isfinite(pe).any() else 1.0
     if len(ax.lines) > 1 + len(kidnap_steps):          # more errors drawn on these axes before: keep them in view
         top = max(top, ax.get_ylim()[1])
-    ax.set_ylim(0.0, top)
-    ticks = [0.0] + [10.0**k for k in range(-1, int(np.floor(np.log10(top))) + 1)]
-    ax.set_yticks(ticks)
+    ax.set_ylim(floor, top)
+    ax.set_yticks([10.0**k for k in range(-3, int(np.floor(np.log10(top))) + 1)])
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _: ""))
     ax.grid(True, alpha=0.3)
     return ax
 
