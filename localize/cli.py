@@ -435,8 +435,12 @@ def write_animation(out_dir: Path, grid: OccupancyGrid, res: RunResult, referenc
     from .plot.mcl import animate_snapshots
 
     aspect = grid.height_m / grid.width_m
+    counts = n_particles
+    if res.trace is not None and getattr(res.trace, "n_particles", None) is not None:
+        counts = {k: int(res.trace.n_particles[k]) for k in res.snapshots}   # what KLD-sampling really drew
     anim = animate_snapshots(grid, res.snapshots, true_poses=reference, estimates=res.estimates,
-                             figsize=(6.0, max(3.0, min(8.0, 6.0 * aspect))), size=2.0, n_particles=n_particles)
+                             figsize=(6.0, max(3.0, min(8.0, 6.0 * aspect))), size=2.0, n_particles=counts,
+                             truth_label="reference path")
     written = []
     try:
         gif = out_dir / "particles.gif"

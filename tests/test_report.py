@@ -82,3 +82,30 @@ def test_a_reference_of_the_wrong_length_is_refused(tracked):
     g, r, tr = tracked
     with pytest.raises(ValueError, match="one pose per scan"):
         report_figure(g, tr, r.poses[:5])
+
+
+def test_the_animation_titles_the_particles_the_filter_really_had_with_legend_trail_and_labels():
+    """With KLD-sampling the cloud shrinks: each frame's title gives that frame's count (issue 44: the GIF said
+    29,320 particles while the filter had 2,000), and a frame has its legend, trails and axis labels."""
+    from localize.kld import KLDSampling
+    from localize.plot.mcl import animate_snapshots
+
+    g = office()
+    angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)
+    r = range_run(g, np.random.default_rng(3), n_steps=12, angles=angles, max_range=8.0)
+    lf = LikelihoodField(g, 8.0, sigma_hit=0.2, temper=0.1)
+    f = MCL.uniform(g, 6000, OdometryMotion(r.alphas, min_std=0.01), lf, rng=np.random.default_rng(4),
+                    kld=KLDSampling(epsilon=0.1, n_min=300, n_max=6000))
+    tr = run_filter(f, 12, r.control, lambda k: (r.ranges[k], angles), snapshot_steps=[0, 11],
+                    snapshot_particles=500)
+    assert tr.n_particles[11] < 6000                       # KLD-sampling shrank the cloud
+    counts = {k: int(tr.n_particles[k]) for k in tr.snapshots}
+    anim = animate_snapshots(g, tr.snapshots, r.poses, tr.poses, n_particles=counts)
+    ax = anim._fig.axes[0]
+    anim._func(1)                                          # the frame of step 11
+    assert ax.get_title().startswith(f"step 11: {counts[11]} particles") and "6000" not in ax.get_title()
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["true path", "estimated path", "particles"]
+    trail = [ln for ln in ax.get_lines() if ln.get_label() == "estimated path"][0]
+    assert len(trail.get_xdata()) == 12                    # the estimate's trail up to this frame
+    assert ax.get_xlabel() == "x (m)" and ax.get_ylabel() == "y (m)"
+    plt.close(anim._fig)

@@ -178,11 +178,15 @@ def _frame_title(step: int, drawn: int, n_particles: int | dict | None) -> str:
 
 def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLike | None = None,
                       estimates: ArrayLike | None = None, interval: int = 250, figsize=(6.0, 3.8),
-                      size: float = 2.0, dpi: int = 72, n_particles: int | dict | None = None):
+                      size: float = 2.0, dpi: int = 72, n_particles: int | dict | None = None,
+                      truth_label: str = "true path"):
     """A matplotlib animation of the particle cloud, one frame per snapshot.
 
-    ``n_particles`` is the filter's particle count for the titles (an int, or
-    a dict step -> count) when the snapshots hold a subsample; by default the
+    Each frame shows the map, the weighted particles, the true (or reference)
+    pose and path so far, the estimate and its trail, a legend and labelled
+    axes. ``n_particles`` is the filter's particle count for the titles (an
+    int, or a dict step -> count, e.g. a run's ``trace.n_particles``, which
+    KLD-sampling changes) when the snapshots hold a subsample; by default the
     title counts the particles drawn, and says "drawn" if fewer than stated.
 
     Embed it in a notebook with ``IPython.display.HTML(localize.plot.animation_html(anim))``;
@@ -195,9 +199,12 @@ def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLik
     >>> import matplotlib.pyplot as plt
     >>> from localize.maps import office
     >>> snaps = {k: (np.array([[5.0 + k, 5.0, 0.0]]), np.ones(1)) for k in range(3)}
-    >>> anim = animate_snapshots(office(), snaps, figsize=(3, 2))
+    >>> path = np.array([[5.0 + k, 5.0, 0.0] for k in range(3)])
+    >>> anim = animate_snapshots(office(), snaps, path, path, figsize=(3, 2))
     >>> "<script" in anim.to_jshtml(fps=4)
     True
+    >>> [t.get_text() for t in anim._fig.axes[0].get_legend().get_texts()]
+    ['true path', 'estimated path', 'particles']
     >>> _frame_title(3, 1000, 2000), _frame_title(3, 50, None)
     ('step 3: 2000 particles (1000 drawn)', 'step 3: 50 particles')
     >>> plt.close("all")
@@ -208,7 +215,7 @@ def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLik
     steps = sorted(snapshots)
     if not steps:
         raise ValueError("snapshots is empty: nothing to animate")
-    fig, ax = plt.subplots(figsize=figsize, dpi=dpi)
+    fig, ax = plt.subplots(figsize=figsize, dpi=dpi, layout="constrained")   # room for the axis labels
     tp = None if true_poses is None else np.asarray(true_poses)
     es = None if estimates is None else np.asarray(estimates)
 
@@ -218,10 +225,17 @@ def animate_snapshots(grid: OccupancyGrid, snapshots: dict, true_poses: ArrayLik
         p, w = snapshots[k]
         draw_belief(grid, p, w, None if tp is None else tp[k], None if es is None else es[k], ax=ax,
                     title=_frame_title(k, len(p), n_particles), size=size)
+        if tp is not None:
+            ax.plot(tp[:k + 1, 0], tp[:k + 1, 1], color="tab:blue", lw=1.2, alpha=0.8, label=truth_label)
+        if es is not None:
+            ax.plot(es[:k + 1, 0], es[:k + 1, 1], color="tab:green", lw=1.2, alpha=0.9, label="estimated path")
+        ax.scatter([], [], s=12, color="tab:red", label="particles")     # the legend's entry for the cloud
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.legend(loc="upper right", fontsize=7, framealpha=0.85)
         return ax.get_children()
 
     anim = FuncAnimation(fig, frame, frames=len(steps), interval=interval, blit=False)
-    fig.tight_layout()
     return anim
 
 
