@@ -32,7 +32,7 @@ def files(tmp_path_factory):
 def run_cli(*argv):
     out, err = stdio.StringIO(), stdio.StringIO()
     with warnings.catch_warnings():
-        warnings.simplefilter("error")  # no numpy RuntimeWarning may escape
+        warnings.simplefilter("error", RuntimeWarning)  # no numpy RuntimeWarning may escape (others: the libraries)
         status = cli.main([str(a) for a in argv], stdout=out, stderr=err)
     return status, out.getvalue(), err.getvalue()
 
