@@ -52,6 +52,7 @@ from localize.grid import OccupancyGrid  # noqa: E402
 LOGS = ("intel", "freiburg-079", "aces", "csail")
 MAP_EVERY = {"freiburg-079": 4}          # mapping the 4,791 Freiburg scans: every 4th is enough
 SUCCESS_M, SUCCESS_RAD, STAY_M, WITHIN = 0.5, np.radians(10.0), 1.0, 0.3
+NEAR_M = 0.3                             # "centimetres right": within this of the reference
 
 
 # ------------------------------------------------------------------ maps that disagree with the scans
@@ -250,7 +251,35 @@ def run_one(job: dict) -> dict:
             "wall": wall, "rtf": dur / wall if dur > 0 else None, "final_state": final_state,
             "false_localized": final_state == "localized" and j["final_error"] > STAY_M,
             "scans_false_localized": int(np.sum((res.state == "localized") & (j["errors"] > STAY_M))),
-            "first_localized": res.trace.first_localized()}
+            "first_localized": res.trace.first_localized(), **state_counts(res.trace, j["errors"])}
+
+
+P_BINS = 10
+
+
+def state_counts(trace, errors: np.ndarray) -> dict:
+    """What the state said against the reference, scan by scan, as counts (summed over runs by the table).
+
+    ``loc``/``loc_off``: scans whose state is localized, and of them those more than STAY_M off;
+    ``near``/``near_loc``: scans within WITHIN_M of the reference after the first localized scan, and of
+    them those whose state is localized; ``p_n``/``p_sum``/``p_right`` per bin of ``p_localized`` (when the
+    trace has it): scans, sum of p, scans truly within STAY_M.
+    """
+    loc = trace.state == "localized"
+    first = trace.first_localized()
+    after = np.arange(len(errors)) >= (first if first is not None else len(errors))
+    near = after & (errors <= NEAR_M)
+    out = {"loc": int(loc.sum()), "loc_off": int(np.sum(loc & (errors > STAY_M))), "near": int(near.sum()),
+           "near_loc": int(np.sum(near & loc))}
+    p = getattr(trace, "p_localized", None)
+    if p is not None:
+        p = np.asarray(p, dtype=float)
+        k = np.clip((p * P_BINS).astype(int), 0, P_BINS - 1)
+        right = errors <= STAY_M
+        out["p_n"] = np.bincount(k, minlength=P_BINS).tolist()
+        out["p_sum"] = np.bincount(k, weights=p, minlength=P_BINS).tolist()
+        out["p_right"] = np.bincount(k, weights=right, minlength=P_BINS).astype(int).tolist()
+    return out
 
 
 def _pct(v, q):
@@ -286,6 +315,41 @@ def summarize(rows: list[dict]) -> list[dict]:
             "localized > 1 m off at some scan": (sum(r["scans_false_localized"] > 0 for r in rs)
                                                  if all("scans_false_localized" in r for r in rs) else "-"),
         })
+    return out
+
+
+def state_quality(rows: list[dict]) -> list[dict]:
+    """Per log and over all: how often "localized" is wrong, and how often a right estimate says so."""
+    out = []
+    order = {n: i for i, n in enumerate([*LOGS, "willow"])}
+    names = sorted(dict.fromkeys(r["name"] for r in rows), key=lambda n: order.get(n, 99))
+    for name in [*names, "all"]:
+        rs = [r for r in rows if (name == "all" or r["name"] == name) and "loc" in r]
+        if not rs:
+            continue
+        loc, off = sum(r["loc"] for r in rs), sum(r["loc_off"] for r in rs)
+        near, near_loc = sum(r["near"] for r in rs), sum(r["near_loc"] for r in rs)
+        out.append({"log": name, "scans": sum(r["scans"] for r in rs), "scans localized": loc,
+                    f"of them > {STAY_M:g} m off": f"{off} ({100.0 * off / max(loc, 1):.2f}%)",
+                    f"scans within {NEAR_M:g} m after the first localized": near,
+                    "of them localized": f"{near_loc} ({100.0 * near_loc / max(near, 1):.1f}%)"})
+    return out
+
+
+def calibration(rows: list[dict], min_count: int = 50) -> list[dict]:
+    """The reliability diagram of ``p_localized`` over all runs: per bin, mean p against the share right."""
+    rs = [r for r in rows if "p_n" in r]
+    if not rs:
+        return []
+    n = np.sum([r["p_n"] for r in rs], axis=0)
+    s = np.sum([r["p_sum"] for r in rs], axis=0)
+    right = np.sum([r["p_right"] for r in rs], axis=0)
+    out = []
+    for b in range(P_BINS):
+        if n[b] >= min_count:
+            out.append({"p_localized": f"{b / P_BINS:.1f}-{(b + 1) / P_BINS:.1f}", "scans": int(n[b]),
+                        "mean p": f"{s[b] / n[b]:.3f}", f"share within {STAY_M:g} m": f"{right[b] / n[b]:.3f}",
+                        "difference": f"{right[b] / n[b] - s[b] / n[b]:+.3f}"})
     return out
 
 
@@ -406,7 +470,12 @@ def main(argv=None) -> int:
         "",
         table(summarize(rows), cols),
         "",
-    ])
+        "What the state said, scan by scan (every scan of every run judged against the reference):",
+        "",
+        table(state_quality(rows), list(state_quality(rows)[0]) if state_quality(rows) else ["log"]),
+        "",
+    ] + (["Calibration of `p_localized` (bins holding at least 50 scans):", "",
+          table(calibration(rows), list(calibration(rows)[0])), ""] if calibration(rows) else []))
     print(text)
     if sink:
         sink.close()
