@@ -62,6 +62,9 @@ class Scenario:
         is corrupt or missing, the robot is carried away, a person blocks the laser ...).
     note : str
         What the fault is, in one sentence.
+    extra : dict
+        What a scenario knows beyond that (the true world of a moved obstacle,
+        the beams a person blocked).
     """
 
     name: str
