@@ -1,0 +1,316 @@
+"""Acceptance tests of the run's state (issue 43): what an honest "localized / searching / lost" says.
+
+Each test localizes one simulated fault of :mod:`scenarios` as ``localize run``
+does and judges the state against the simulated truth. The tests know nothing
+of how the state is computed: they read ``trace.state`` and ``trace.poses``,
+and ``trace.p_localized`` only where a trace has one. The rules, after the issue:
+
+* **never "localized" while more than 1 m off** (``FAR``): "localized" claims
+  the estimate is within 1 m of the robot. Excused are only the scans of a
+  fault that carries the robot away from the estimate (a kidnapping, a missing
+  or corrupt odometry record) and ``GRACE`` scans after it: see :data:`GRACE`.
+* **"localized" at most scans where the estimate is within 0.3 m**
+  (``NEAR``), after the first localized scan: ``MIN_SHARE`` of them (see there).
+* **"lost" is never said of an estimate within 0.3 m** where the fault is
+  one that a right estimate survives (a moved obstacle, a person in front
+  of the laser, an understated maximum range).
+* with ``p_localized``: at most 0.5 wherever the estimate is more than 1 m off
+  (outside the excused scans), on average at least 0.8 where it is within
+  0.3 m (see :func:`check_probability`), and never rising while the laser is dead.
+
+Each test runs two seeds (two filters on the same simulated log; about a
+second of CPU each). The tests that the threshold state of today fails are
+marked ``xfail(strict=True)`` with what it does wrong; remove the mark when
+the state passes. ``test_the_checks_catch_a_dishonest_state`` feeds the checks
+doctored traces (always localized, lost while right, a probability that
+claims too much) and asserts that each check fails on them.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import scenarios as S
+
+FAR = 1.0
+NEAR = 0.3
+
+#: Scans after the last scan of a fault that moves the robot away from its estimate during which the state
+#: may still say "localized" while more than 1 m off. A scan that fits the map nowhere near the estimate is
+#: also what a person standing in front of the laser or a glitch of the laser produces, and a state that
+#: turned lost on one such scan would be wrong there (see test_walking_person...); a second one is evidence.
+#: The command line weights the particles only after 0.2 m or 0.3 rad of odometry (the robot drives
+#: 0.2 m per scan), so two scans hold one or two updates. The fault's own scans are excused too: a
+#: kidnapping's scan is the first evidence of it, and while odometry records are missing the odometry
+#: says the robot stands still, so the driver does not use those scans at all.
+GRACE = 2
+
+#: Share of the scans within NEAR of the truth, after the first localized scan, that must say "localized".
+#: The issue asks 97% over the benchmarks' thousands of scans. These runs judge 70-145 scans each, and
+#: every return to the right place after a fault (a kidnapping, a missing turn) may cost as many scans of
+#: re-confirmation as the first localization did: 1-7 scans in these runs lie between the first estimate
+#: within 0.3 m and the first "localized" (17 with the understated range). One such delay and a few
+#: scans of doubt around a fault are 5-10% of a run: 0.9 requires the state to be right at nine of ten
+#: right scans.
+MIN_SHARE = 0.9
+
+SEEDS = (0, 1)
+
+
+# ============================================================================ the checks
+def _states(trace) -> np.ndarray:
+    s = np.asarray(trace.state).astype(str)
+    assert set(np.unique(s)) <= {"searching", "localized", "lost"}, f"unknown states {set(np.unique(s))}"
+    return s
+
+
+def _show(idx, err, state) -> str:
+    idx = np.asarray(idx)
+    shown = ", ".join(f"{k} ({err[k]:.2f} m, {state[k]})" for k in idx[:12])
+    return shown + (f" ... ({idx.size} scans)" if idx.size > 12 else "")
+
+
+def excused(sc: S.Scenario, grace: int = GRACE) -> np.ndarray:
+    """The fault's scans and ``grace`` scans after each stretch of them."""
+    m = np.array(sc.fault)
+    for k in np.flatnonzero(sc.fault):
+        m[k:k + grace + 1] = True
+    return m
+
+
+def check_never_localized_far(state, err, excuse=None) -> None:
+    """No scan says "localized" while the estimate is more than FAR from the robot (outside ``excuse``)."""
+    bad = (state == "localized") & (err > FAR)
+    if excuse is not None:
+        bad &= ~excuse
+    assert not bad.any(), f"'localized' while more than {FAR} m off at scans " + _show(np.flatnonzero(bad), err, state)
+
+
+def judged_near(state, err, exclude=None) -> np.ndarray:
+    """Scans within NEAR of the truth from the first localized scan on (outside ``exclude``)."""
+    k0 = np.flatnonzero(state == "localized")
+    assert k0.size, "never localized"
+    m = (err <= NEAR) & (np.arange(err.size) >= k0[0])
+    if exclude is not None:
+        m &= ~exclude
+    return m
+
+
+def check_localized_when_near(state, err, exclude=None, share: float = MIN_SHARE) -> None:
+    """At least ``share`` of the scans within NEAR (after the first localized scan) say "localized"."""
+    near = judged_near(state, err, exclude)
+    assert near.sum() >= 20, f"only {near.sum()} scans within {NEAR} m to judge: the scenario did not localize"
+    said = float(np.mean(state[near] == "localized"))
+    miss = np.flatnonzero(near & (state != "localized"))
+    assert said >= share, (f"only {said:.0%} of the {near.sum()} scans within {NEAR} m say 'localized' (at least "
+                           f"{share:.0%} required); not at " + _show(miss, err, state))
+
+
+def check_not_lost_when_near(state, err) -> None:
+    """No scan within NEAR of the truth says "lost" (for faults that a right estimate survives)."""
+    bad = (state == "lost") & (err <= NEAR)
+    assert not bad.any(), f"'lost' while within {NEAR} m at scans " + _show(np.flatnonzero(bad), err, state)
+
+
+def check_probability(trace, err, excuse=None, exclude=None) -> None:
+    """With ``trace.p_localized``: low where the estimate is more than FAR off, high where it is within NEAR.
+
+    * at most 0.5 at every scan more than FAR off (outside ``excuse``): above 0.5 it
+      claims that the estimate is more likely right than wrong;
+    * on average at least 0.8 over the scans within NEAR after the first localized
+      scan (outside ``exclude``): every one of them is right, so a calibrated
+      probability there is near 1; the issue allows a reliability bin to be off by
+      0.1, and 0.8 leaves room for the scans of re-confirmation after a fault.
+    """
+    p = getattr(trace, "p_localized", None)
+    if p is None:
+        return
+    p = np.asarray(p, dtype=float)
+    assert p.shape == err.shape and np.all((p >= 0) & (p <= 1)), "p_localized must be a probability per scan"
+    far = err > FAR
+    if excuse is not None:
+        far &= ~excuse
+    assert not np.any(p[far] > 0.5), (f"p_localized above 0.5 while more than {FAR} m off at scans "
+                                      + ", ".join(f"{k} ({err[k]:.2f} m, p {p[k]:.2f})"
+                                                  for k in np.flatnonzero(far & (p > 0.5))[:12]))
+    state = np.asarray(trace.state).astype(str)
+    if np.any(state == "localized"):
+        near = judged_near(state, err, exclude)
+        if near.any():
+            assert p[near].mean() >= 0.8, f"p_localized averages {p[near].mean():.2f} over the scans within {NEAR} m"
+
+
+def check_no_evidence_claimed(trace, dead) -> None:
+    """Over the scans of a dead laser the state never turns "localized" and ``p_localized`` never rises."""
+    state = _states(trace)
+    idx = np.flatnonzero(dead)
+    turned = [int(k) for k in idx if k > 0 and state[k] == "localized" and state[k - 1] != "localized"]
+    assert not turned, f"turned 'localized' without a valid reading at scans {turned}"
+    if idx[0] == 0:
+        assert not np.any(state == "localized"), "'localized' although the laser never gave a valid reading"
+    p = getattr(trace, "p_localized", None)
+    if p is not None:
+        p = np.asarray(p, dtype=float)
+        rise = np.flatnonzero(np.diff(p[idx]) > 1e-9) + idx[0] + 1
+        assert not rise.size, f"p_localized rose without a valid reading at scans {rise[:12].tolist()}"
+
+
+def honest_run(sc: S.Scenario, seed: int, *, excuse=None, exclude=None, keep_when_near: bool = False):
+    """Localize ``sc`` with ``seed`` and apply the checks every scenario shares; return (trace, err, state)."""
+    tr = S.run(sc, seed)
+    err = S.position_errors(sc, tr)
+    state = _states(tr)
+    assert np.all(np.isfinite(np.asarray(tr.poses))) and np.all(np.abs(np.asarray(tr.poses)[:, :2]) < 100), \
+        "estimates left the map by more than 100 m"
+    check_never_localized_far(state, err, excuse)
+    check_localized_when_near(state, err, exclude)
+    if keep_when_near:
+        check_not_lost_when_near(state, err)
+    check_probability(tr, err, excuse, exclude)
+    return tr, err, state
+
+
+# ============================================================================ today's four
+@pytest.mark.parametrize("value", [0.0, 12.0, 0.03])      # failed readings, no return, all below min_range
+def test_dead_laser_from_the_start_is_never_localized(value):
+    sc = S.dead_laser(value)
+    for seed in SEEDS:
+        tr = S.run(sc, seed)
+        state = _states(tr)
+        assert np.all(state == "searching"), f"seed {seed}: {sorted(set(state))}"  # nothing found, nothing lost
+        check_no_evidence_claimed(tr, sc.fault)
+        check_probability(tr, S.position_errors(sc, tr))
+
+
+def test_dead_laser_during_the_run_claims_no_new_evidence():
+    """The laser dies at scan 80 (of 150); the odometry alone carries the estimate, which drifts to ~1.2 m off."""
+    sc = S.dead_laser(0.0, from_scan=80)
+    for seed in SEEDS:
+        tr, err, state = honest_run(sc, seed, exclude=sc.fault)
+        check_no_evidence_claimed(tr, sc.fault)
+
+
+def test_corrupt_odometry_record_is_survived():
+    """The issue's record, (1e15, 1e15, 0.3): impossible, rejected; the estimate stays right throughout."""
+    sc = S.corrupt_odometry(70)
+    for seed in SEEDS:
+        tr, err, state = honest_run(sc, seed, excuse=excused(sc), exclude=excused(sc))
+        assert state[-1] == "localized" and err[-1] < 0.5, f"seed {seed}: ends {state[-1]} {err[-1]:.2f} m off"
+
+
+def test_plausible_corrupt_odometry_record_is_not_called_localized_while_off():
+    """A record 3 m off that no rule can reject: the estimate jumps 2.7-3.7 m at scan 70 and must be found again."""
+    sc = S.corrupt_odometry(70, jump=3.0)
+    for seed in SEEDS:
+        tr, err, state = honest_run(sc, seed, excuse=excused(sc), exclude=excused(sc))
+        assert err[70] > FAR, f"seed {seed}: the record did not throw the estimate off ({err[70]:.2f} m)"
+
+
+KIDNAP_NOTICED = 3      # scans: the kidnapping's own scan and GRACE more
+
+
+def test_kidnapping_is_noticed_within_three_scans():
+    sc = S.kidnapping(90)
+    for seed in SEEDS:
+        tr, err, state = honest_run(sc, seed, excuse=excused(sc), exclude=excused(sc))
+        assert state[89] == "localized" and err[89] < NEAR, f"seed {seed}: not tracking before the kidnapping"
+        after = state[90:90 + KIDNAP_NOTICED]
+        assert np.any(after != "localized"), f"seed {seed}: still 'localized' at scans 90-{89 + KIDNAP_NOTICED}, " \
+                                             f"{err[90:90 + KIDNAP_NOTICED].round(1).tolist()} m off"
+
+
+def test_featureless_corridor_is_never_localized():
+    """A robot in a long, featureless corridor: its scans cannot tell where along it it is (3 seeds)."""
+    sc = S.corridor()
+    for seed in (0, 1, 2):
+        tr = S.run(sc, seed)
+        state = _states(tr)
+        err = S.position_errors(sc, tr)
+        assert not np.any(state == "localized"), f"seed {seed}: 'localized' at " + \
+            _show(np.flatnonzero(state == "localized"), err, state)
+        p = getattr(tr, "p_localized", None)
+        if p is not None:         # 1 m of a 16 m stretch that fits as well: the robot is not known to be there
+            assert np.max(p) <= 0.5, f"seed {seed}: p_localized reaches {np.max(p):.2f} in the corridor"
+
+
+# ============================================================================ the issue's four new ones
+@pytest.mark.xfail(strict=True, reason="issue 43: the threshold state says 'localized' at scan 95 while 1.1 m "
+                   "off (seeds 0 and 1: the turn's scans 89-92 were gated out, two updates of misfit since), and at "
+                   "scans 107-115 (seed 0) / 109-115 (seed 1) while 1.3-1.7 m off, after a restart won a wrong place")
+def test_missing_odometry_in_a_turn_is_not_called_localized():
+    sc = S.missing_odometry_in_turn()
+    for seed in SEEDS:
+        tr, err, state = honest_run(sc, seed, excuse=excused(sc), exclude=excused(sc))
+        assert state[-1] == "localized" and err[-1] < NEAR, f"seed {seed}: ends {state[-1]} {err[-1]:.2f} m off"
+
+
+@pytest.mark.xfail(strict=True, reason="issue 43: the threshold state turns 'lost' at scan 135 and stays lost "
+                   "to scan 149 (seed 0) / 146 (seed 1) while the estimate is 0.05-0.39 m off (within 0.3 m from "
+                   "scan 139 on): 89% of seed 0's right scans say 'localized'")
+def test_understated_max_range_does_not_make_a_right_estimate_lost():
+    sc = S.understated_max_range(2.5)
+    for seed in SEEDS:
+        tr, err, state = honest_run(sc, seed, keep_when_near=True)
+        assert err[-1] < NEAR, f"seed {seed}: ends {err[-1]:.2f} m off"
+
+
+@pytest.mark.xfail(strict=True, reason="issue 43: the threshold state says 'lost' at scans 116-120 (seed 0) / "
+                   "115-122 (seed 1) while the estimate is 0.07-0.29 m off, as the robot passes a cabinet that the "
+                   "map draws 1.5 m from where it stands")
+def test_moved_obstacle_does_not_make_a_right_estimate_lost():
+    sc = S.moved_obstacle()
+    for seed in SEEDS:
+        honest_run(sc, seed, keep_when_near=True)
+
+
+def test_walking_person_does_not_make_a_right_estimate_lost():
+    sc = S.walking_person()
+    person = np.flatnonzero(sc.fault)
+    for seed in SEEDS:
+        tr, err, state = honest_run(sc, seed, keep_when_near=True)
+        # the person is no reason for doubt: a right estimate stays "localized" through the 20 scans and after
+        during = np.arange(person[0], person[-1] + 6)
+        doubt = during[(err[during] <= NEAR) & (state[during] != "localized")]
+        assert not doubt.size, f"seed {seed}: not 'localized' while right at " + _show(doubt, err, state)
+
+
+# ============================================================================ the checks can fail
+def test_the_checks_catch_a_dishonest_state():
+    """Doctored traces of a real run: each check fails on the lie it is there to catch."""
+    sc = S.kidnapping(90)
+    tr = S.run(sc, 0)
+    err = S.position_errors(sc, tr)
+    state = _states(tr)
+    ex = excused(sc)
+    check_never_localized_far(state, err, ex)                        # today's run passes ...
+    check_localized_when_near(state, err, ex)
+    with pytest.raises(AssertionError, match="while more than 1.0 m off"):
+        check_never_localized_far(np.full(err.size, "localized"), err, ex)   # ... always localized does not
+    with pytest.raises(AssertionError, match="while more than 1.0 m off at scans 90"):
+        check_never_localized_far(state, err, None)                  # nor without the kidnapping's grace
+    lost_after = np.where(np.arange(err.size) >= 100, "lost", state)
+    with pytest.raises(AssertionError, match="scans within 0.3 m say 'localized'"):
+        check_localized_when_near(lost_after, err, ex)
+    with pytest.raises(AssertionError, match="'lost' while within 0.3 m"):
+        check_not_lost_when_near(lost_after, err)
+
+    def fake(p, st=state):
+        return SimpleNamespace(state=st, poses=tr.poses, p_localized=p)
+
+    honest = np.where(err > FAR, 0.05, 0.95)
+    check_probability(fake(honest), err, ex, ex)
+    with pytest.raises(AssertionError, match="above 0.5 while more than"):
+        check_probability(fake(np.full(err.size, 0.9)), err, ex, ex)
+    with pytest.raises(AssertionError, match="averages"):
+        check_probability(fake(np.where(err > FAR, 0.05, 0.6)), err, ex, ex)
+
+    dead = np.zeros(err.size, dtype=bool)
+    dead[100:] = True
+    turned = np.where(np.arange(err.size) >= 120, "localized", np.where(dead, "lost", state))
+    with pytest.raises(AssertionError, match="without a valid reading at scans \\[120\\]"):
+        check_no_evidence_claimed(fake(None, turned), dead)
+    rising = np.linspace(0, 1, err.size)
+    with pytest.raises(AssertionError, match="p_localized rose"):
+        check_no_evidence_claimed(fake(rising, np.where(dead, "lost", state)), dead)
