@@ -36,6 +36,9 @@ def main() -> None:
     z = np.minimum(scan, MAX_RANGE - 1e-3)  # every beam returns: the worst case for the field
     w, c = best_wall_cpu(lambda: lf.log_likelihood(poses, z, angles), 10)
     rows.append(("likelihood field, whole scan", w, c))
+    lf32 = LikelihoodField(grid, MAX_RANGE, 0.9, 0.1, sigma_hit=0.2, dtype=np.float32)
+    w, c = best_wall_cpu(lambda: lf32.log_likelihood(poses, z, angles), 10)
+    rows.append(("likelihood field, whole scan, dtype=float32 (float32 sums)", w, c))
     print(f"Measurement models on benchmark_map(800), {N_POSES} poses x {N_BEAMS} beams\n")
     print("| task | wall [ms] | CPU [ms] | M beams/s (CPU) |")
     print("|---|---:|---:|---:|")

@@ -67,7 +67,6 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import ndtr, ndtri
 
 from ._checks import (
     check_angles,
@@ -96,11 +95,40 @@ _Z_FLOOR = 1e-3
 #: Probabilities handed to the inverse normal CDF are clipped into [_TINY_P, _BELOW_ONE], where it is finite.
 _TINY_P, _BELOW_ONE = 1e-300, 1 - 1e-16
 #: LikelihoodField.log_likelihood works on blocks of about this many end points (poses x beams), so that its
-#: work arrays (40 bytes an end point, 2.6 MB) stay near the core instead of N x B temporaries.
+#: work arrays (48 bytes an end point, 3.1 MB) stay near the core instead of N x B temporaries.
 _LF_BLOCK = 1 << 16
+#: The likelihood field's table is built from distances capped at max_dist by a few shifted passes over the
+#: map while max_dist spans at most this many cells; beyond, scipy's distance transform is the faster way.
+_LF_MAX_CAP_CELLS = 96
 
 
 # ------------------------------------------------------------------ helpers
+def _ndtr(x: ArrayLike) -> NDArray[np.float64]:
+    """The standard normal CDF, :func:`scipy.special.ndtr` (scipy is imported on first use, not with the module).
+
+    Examples
+    --------
+    >>> float(_ndtr(0.0))
+    0.5
+    """
+    from scipy.special import ndtr
+
+    return ndtr(x)
+
+
+def _ndtri(p: ArrayLike) -> NDArray[np.float64]:
+    """The standard normal quantile, :func:`scipy.special.ndtri` (scipy imported on first use).
+
+    Examples
+    --------
+    >>> round(float(_ndtri(0.975)), 4)
+    1.96
+    """
+    from scipy.special import ndtri
+
+    return ndtri(p)
+
+
 def _weights(names: tuple[str, ...], values: tuple[float, ...], tol: float = 1e-6) -> NDArray[np.float64]:
     w = np.array([float(v) for v in values])
     for n, v in zip(names, w):
@@ -337,7 +365,7 @@ class BeamModel:
         zs = np.clip(np.asarray(z_expected, dtype=float), self.z_floor, self.max_range)
         z, zs = np.broadcast_arrays(z, zs)
         sig, lam, zmax = self.sigma_hit, self.lambda_short, self.max_range
-        eta = ndtr((zmax - zs) / sig) - ndtr(-zs / sig)
+        eta = _ndtr((zmax - zs) / sig) - _ndtr(-zs / sig)
         p_hit = np.exp(-0.5 * ((z - zs) / sig) ** 2) / (sig * _SQRT2PI) / eta
         p_short = np.where(z <= zs, lam * np.exp(-lam * z) / -np.expm1(-lam * zs), 0.0)
         p_max = (z >= zmax).astype(float)
@@ -392,7 +420,7 @@ class BeamModel:
         edge = (zs < _ETA_SIGMAS * sig) | (zs > zmax - _ETA_SIGMAS * sig)
         if edge.any():
             ze = zs[edge].astype(float)
-            eta = ndtr((zmax - ze) / sig) - ndtr(-ze / sig)
+            eta = _ndtr((zmax - ze) / sig) - _ndtr(-ze / sig)
             g[edge] /= eta.astype(dt)
         # short: lambda e^{-lambda z} / (1 - e^{-lambda z*}) on z <= z*; the numerator
         # depends on the reading only, so it is computed per beam and broadcast
@@ -517,8 +545,8 @@ class BeamModel:
         zmax, sig, lam = self.max_range, self.sigma_hit, self.lambda_short
         k = rng.choice(4, size=zs.shape, p=[self.z_hit, self.z_short, self.z_max, self.z_rand])
         u = rng.random(zs.shape)
-        lo, hi = ndtr(-zs / sig), ndtr((zmax - zs) / sig)
-        hit = zs + sig * ndtri(np.clip(lo + u * (hi - lo), _TINY_P, _BELOW_ONE))
+        lo, hi = _ndtr(-zs / sig), _ndtr((zmax - zs) / sig)
+        hit = zs + sig * _ndtri(np.clip(lo + u * (hi - lo), _TINY_P, _BELOW_ONE))
         short = -np.log1p(u * np.expm1(-lam * zs)) / lam
         rand = u * zmax
         z = np.choose(k, [hit, short, np.full(zs.shape, zmax), rand])
@@ -597,6 +625,42 @@ def _rowsum_is_numpys(n: int) -> bool:
 
 
 # -------------------------------------------------------- likelihood field
+def _capped_sq_distance(obstacles: NDArray[np.bool_], cap: int) -> NDArray[np.int16]:
+    """Squared distance (in cells^2) from each cell centre to the nearest obstacle cell's, exact up to ``cap^2``.
+
+    Above ``cap^2`` the value is only known to be larger (at most ``2 (cap + 1)^2``, so 16 bits hold it for
+    ``cap <= 126``). Two passes, as in a separable distance transform: the vertical distance ``v`` to the
+    nearest obstacle of the same column (capped at ``cap + 1``, two sweeps over the rows), then
+    ``min_s v[i, j + s]^2 + s^2`` over ``|s| <= cap``. No obstacle anywhere: every value is above ``cap^2``.
+    """
+    rows, cols = obstacles.shape
+    top = cap + 1
+    if 2 * top * top > np.iinfo(np.int16).max:
+        raise ValueError(f"cap must be at most 126 cells; got {cap}")
+    v = np.full((rows, cols), top, dtype=np.int16)
+    run = np.full(cols, top, dtype=np.int16)
+    for i in range(rows):                       # downwards: distance to the nearest obstacle above or at i
+        run += 1
+        run[obstacles[i]] = 0
+        np.minimum(run, top, out=run)
+        v[i] = run
+    run[...] = top
+    for i in range(rows - 1, -1, -1):           # upwards
+        run += 1
+        run[obstacles[i]] = 0
+        np.minimum(run, top, out=run)
+        np.minimum(v[i], run, out=v[i])
+    v *= v
+    out = v.copy()
+    tmp = np.empty_like(v)
+    for s in range(1, min(cap, cols - 1) + 1):
+        np.add(v[:, :-s], s * s, out=tmp[:, s:])             # an obstacle s columns to the left
+        np.minimum(out[:, s:], tmp[:, s:], out=out[:, s:])
+        np.add(v[:, s:], s * s, out=tmp[:, :-s])             # ... and to the right
+        np.minimum(out[:, :-s], tmp[:, :-s], out=out[:, :-s])
+    return out
+
+
 class LikelihoodField:
     """The likelihood-field (end-point) model, PR table 6.3 (ROS AMCL's default).
 
@@ -668,6 +732,14 @@ class LikelihoodField:
         6.3 exactly); the command line uses 0.2 (``--z-short``).
     lambda_short : float
         Rate (1/metre, > 0) of the exponential short-reading density.
+    dtype : numpy float dtype
+        Precision of the sum over a scan's beams in :meth:`log_likelihood`. ``np.float64`` (default) adds
+        the float32 table entries in double precision, bit for bit as the whole-cloud formula did.
+        ``np.float32`` adds them in single precision (less memory traffic, faster): the end points, and
+        so the table entries, are the same; a pose's sum of ``B`` entries ``v_k`` then differs from the
+        float64 one by at most ``gamma_(B-1) sum_k |v_k|`` with ``gamma_n = n u / (1 - n u)``,
+        ``u = 2^-24`` (Higham, *Accuracy and Stability of Numerical Algorithms*, 2nd ed. 2002, eq. 4.4),
+        times ``temper``: about 1e-3 nats for 100 beams whose entries are near 2 in magnitude.
 
     Examples
     --------
@@ -685,7 +757,15 @@ class LikelihoodField:
                  sigma_hit: float = 0.2, *, max_dist: float | None = None,
                  sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
                  temper: float = 1.0, min_range: float = 0.0, unknown_is_obstacle: bool | None = None,
-                 unknown_neutral: bool = True, z_short: float = 0.0, lambda_short: float = 0.5) -> None:
+                 unknown_neutral: bool = True, z_short: float = 0.0, lambda_short: float = 0.5,
+                 dtype: type | str = np.float64) -> None:
+        try:
+            dt = np.dtype(dtype) if isinstance(dtype, (type, str, np.dtype)) else None
+        except TypeError:
+            dt = None
+        if dt is None or dt.type not in (np.float32, np.float64):
+            raise ValueError(f"dtype must be np.float64 (default, exact sums) or np.float32 (faster); got {dtype!r}")
+        self.dtype = dt.type
         self.unknown_neutral = bool(unknown_neutral)
         self.z_short = check_probability(z_short, "z_short")
         self.lambda_short = check_positive(lambda_short, "lambda_short", "per metre")
@@ -714,7 +794,8 @@ class LikelihoodField:
     def __repr__(self) -> str:
         return (f"LikelihoodField(max_range={self.max_range:g}, z_hit={self.z_hit:g}, z_rand={self.z_rand:g}, "
                 f"sigma_hit={self.sigma_hit:g}, max_dist={self.max_dist:g}"
-                + (f", z_short={self.z_short:g}" if self.z_short > 0 else "") + ")")
+                + (f", z_short={self.z_short:g}" if self.z_short > 0 else "")
+                + (", dtype=float32" if self.dtype is np.float32 else "") + ")")
 
     def short_floor(self, z: ArrayLike) -> NDArray[np.float64]:
         """The lowest score a returned beam of range ``z`` can get: ``log(z_rand / max_range + z_short p_short(z))``.
@@ -752,24 +833,76 @@ class LikelihoodField:
         res = g.resolution
         pad = int(math.ceil(self.max_range / res)) + 2
         rows, cols = g.shape
-        cells = self.point_log_prob(g.distance_field)
         outside = float(self.point_log_prob(self.max_dist))
         self.unknown_log_prob = outside
+        known = None
         if not g.unknown_is_obstacle and self.unknown_neutral:
-            # the map says nothing about its unknown cells: an end point there scores the log of the mean
-            # likelihood of one dropped at a random place of the known map (the same for every pose). Off the
-            # map it is a miss, as in AMCL.
             known = ~g.unknown
-            if known.any() and not known.all():
-                self.unknown_log_prob = float(np.log(np.mean(np.exp(cells[known]))))
-                cells = np.where(known, cells, self.unknown_log_prob)
+            if not known.any() or known.all():
+                known = None
         # float32 from the start (the same rounding as a float64 table cast afterwards, without that table)
         table = np.full((rows + 2 * pad, cols + 2 * pad), outside, dtype=np.float32)
-        table[pad:pad + rows, pad:pad + cols] = cells
+        inner = table[pad:pad + rows, pad:pad + cols]
+        if not self._fill_capped(inner, known):
+            cells = self.point_log_prob(g.distance_field)
+            if known is not None:
+                # the map says nothing about its unknown cells: an end point there scores the log of the mean
+                # likelihood of one dropped at a random place of the known map (the same for every pose). Off
+                # the map it is a miss, as in AMCL.
+                self.unknown_log_prob = float(np.log(np.mean(np.exp(cells[known]))))
+                cells = np.where(known, cells, self.unknown_log_prob)
+            inner[...] = cells
         self._pad = pad
         self._table = table
         self._flat = self._table.ravel()
         self._wp = cols + 2 * pad
+
+    def _fill_capped(self, inner: NDArray[np.float32], known: NDArray[np.bool_] | None) -> bool:
+        """Fill the table's map cells from squared cell distances capped at ``max_dist`` (no scipy, no float field).
+
+        Each map cell's score depends only on its squared distance ``d2 = a^2 + b^2`` (cells) to the nearest
+        obstacle, and only while ``d2 * res^2 < max_dist^2``: a table over ``d2`` holds every score. Its
+        entries are computed as scipy's distance transform computes the distance (``sqrt((a res)^2 + (b
+        res)^2)``) and then exactly as the field-wide formula, so the float32 table is the one built from
+        :attr:`OccupancyGrid.distance_field` -- provided that every way of writing ``d2`` as ``a^2 + b^2``
+        gives the same float32 score (scipy may pick either nearest obstacle of a tie) and that the unknown
+        cells' mean score rounds to float32 the same way within a margin far wider than the last bits a
+        tie can change. Returns False (and fills nothing) where that is not so, or where the cap is so wide
+        that scipy is the faster way; the caller then builds the table from the distance field.
+        """
+        g = self.grid
+        kc = int(math.ceil(self.max_dist / g.resolution)) + 1     # every d2 above kc^2 scores as max_dist
+        if kc > _LF_MAX_CAP_CELLS:
+            return False
+        far = kc * kc + 1
+        a, b = np.triu_indices(kc + 1)                             # every a <= b <= kc: d2 = a^2 + b^2
+        d2 = a * a + b * b
+        ok = d2 < far
+        a, b, d2 = a[ok], b[ok], d2[ok]
+        ar, br = a * g.resolution, b * g.resolution
+        dist = np.append(np.sqrt(ar * ar + br * br), self.max_dist)  # as scipy: sum of the squared offsets
+        score = self.point_log_prob(dist)
+        lut64 = np.full(far + 1, score[-1])
+        lut64[d2] = score[:-1]                                     # one representative per d2 ...
+        lut32 = lut64.astype(np.float32)
+        if not np.array_equal(lut32[d2], score[:-1].astype(np.float32)):
+            return False                                           # ... which every other one must match
+        sq = _capped_sq_distance(g.obstacles, kc)
+        np.minimum(sq, far, out=sq)
+        if known is not None:
+            cells = lut64.take(sq[known])                          # the known cells in C order, as cells[known]
+            u = float(np.log(np.mean(np.exp(cells, out=cells))))
+            del cells
+            margin = 1e-12 * abs(u)
+            if not np.float32(u) == np.float32(u - margin) == np.float32(u + margin):
+                return False
+            self.unknown_log_prob = u
+        step = max(1, _LF_BLOCK // max(1, sq.shape[1]))              # rows at a time: small index temporaries
+        for r in range(0, sq.shape[0], step):
+            lut32.take(sq[r:r + step], out=inner[r:r + step])
+        if known is not None:
+            inner[~known] = np.float32(self.unknown_log_prob)
+        return True
 
     @property
     def table(self) -> NDArray[np.float32]:
@@ -839,7 +972,9 @@ class LikelihoodField:
         Poses are scored in blocks of about 65,536 end points with work arrays
         kept on the model (no N x B temporaries), giving the same bits as the
         whole-cloud formula: float32 end points, float64 sum of each pose's
-        beams in numpy's summation order. Not thread-safe on one model.
+        beams in numpy's summation order. With ``dtype=np.float32`` the same
+        entries are summed in float32 (see the class's ``dtype``). Not
+        thread-safe on one model.
 
         Examples
         --------
@@ -861,47 +996,41 @@ class LikelihoodField:
         # end point in (padded) cell units: p + R(theta) (z cos a, z sin a), every step rounded to float32
         bx = (z * np.cos(a) * inv).astype(f32)
         by = (z * np.sin(a) * inv).astype(f32)
-        c = np.cos(sp[:, 2]).astype(f32)[:, None]
-        s = np.sin(sp[:, 2]).astype(f32)[:, None]
-        x0 = ((sp[:, 0] - g.origin[0]) * inv + self._pad).astype(f32)[:, None]
-        y0 = ((sp[:, 1] - g.origin[1]) * inv + self._pad).astype(f32)[:, None]
+        c = np.cos(sp[:, 2]).astype(f32)
+        s = np.sin(sp[:, 2]).astype(f32)
+        x0 = ((sp[:, 0] - g.origin[0]) * inv + self._pad).astype(f32)
+        y0 = ((sp[:, 1] - g.origin[1]) * inv + self._pad).astype(f32)
+        del sp
         rows_p, cols_p = self._table.shape
         reach = self.max_range * inv + 1
         # poses far off the map: clip end points onto the padded table's border (which holds the off-map score)
         clip = (float(x0.min()) - reach < 0 or float(y0.min()) - reach < 0
                 or float(x0.max()) + reach >= cols_p or float(y0.max()) + reach >= rows_p)
-        floor = self.short_floor(z).astype(f32).astype(np.float64)[:, None] if self.z_short > 0 else None
+        single = self.dtype is np.float32
+        floor = None
+        if self.z_short > 0:
+            floor = self.short_floor(z).astype(f32)[:, None]
+            floor = floor if single else floor.astype(np.float64)
         b = z.size
         nb = max(1, min(n, _LF_BLOCK // b))
-        # beams x poses layout: each beam's offsets are one scalar against a row of poses
-        bx, by = bx[:, None], by[:, None]
-        c, s, x0, y0 = (v[:, 0] for v in (c, s, x0, y0))
-        ex, ey, t, j, i, ii, v32, vals, r = self._work(nb, b)
+        # beams x poses layout: each beam's offsets fill a row of bx and by once per call, so that the products
+        # broadcast only the poses' cos and sin along the rows (numpy's loops for a broadcast column are slow)
+        work = self._work(nb, b)
+        np.copyto(work[7], bx[:, None])
+        np.copyto(work[8], by[:, None])
         exact_sum = _rowsum_is_numpys(b)
-        widen = ii is not i
         for k in range(0, n, nb):
             m = min(nb, n - k)
             if m < nb:
-                ex, ey, t, j, i, ii, v32, vals, r = (w[..., :m] for w in (ex, ey, t, j, i, ii, v32, vals, r))
-            ck, sk = c[k:k + m], s[k:k + m]
-            np.multiply(bx, ck, out=ex)
-            np.multiply(by, sk, out=t)
-            ex -= t
-            ex += x0[k:k + m]
-            np.multiply(bx, sk, out=ey)
-            np.multiply(by, ck, out=t)
-            ey += t
-            ey += y0[k:k + m]
-            if clip:
-                np.clip(ex, 0, cols_p - 1, out=ex)
-                np.clip(ey, 0, rows_p - 1, out=ey)
-            np.copyto(j, ex, casting="unsafe")       # truncation, as astype: every coordinate is >= 0 here
-            np.copyto(i, ey, casting="unsafe")
-            i *= self._wp
-            i += j
-            if widen:
-                np.copyto(ii, i)
-            self._flat.take(ii, out=v32, mode="clip")   # every index is inside the table: "clip" never clips
+                work = tuple(w[..., :m] for w in work)
+            v32, vals, r = work[6], work[-2], work[-1]
+            self._entries(c[k:k + m], s[k:k + m], x0[k:k + m], y0[k:k + m], clip, work)
+            if single:       # float32 sums: the bound of the class's dtype
+                if floor is not None:
+                    np.maximum(v32, floor, out=v32)
+                np.add.reduce(v32, axis=0, out=vals)
+                ll[k:k + m] = vals
+                continue
             np.copyto(vals, v32)
             if floor is not None:
                 np.maximum(vals, floor, out=vals)
@@ -910,6 +1039,30 @@ class LikelihoodField:
             else:
                 ll[k:k + m] = np.ascontiguousarray(vals.T, dtype=f32).sum(axis=1, dtype=np.float64)
         return ll * self.temper if self.temper != 1.0 else ll
+
+    def _entries(self, c: NDArray, s: NDArray, x0: NDArray, y0: NDArray, clip: bool,
+                 work: tuple[NDArray, ...]) -> None:
+        """The table entries of one block's end points (beams x poses) into ``work``'s ``v32``."""
+        ex, ey, t, j, i, ii, v32, bx, by = work[:9]
+        np.multiply(bx, c, out=ex)
+        np.multiply(by, s, out=t)
+        ex -= t
+        ex += x0
+        np.multiply(bx, s, out=ey)
+        np.multiply(by, c, out=t)
+        ey += t
+        ey += y0
+        if clip:
+            rows_p, cols_p = self._table.shape
+            np.clip(ex, 0, cols_p - 1, out=ex)
+            np.clip(ey, 0, rows_p - 1, out=ey)
+        np.copyto(j, ex, casting="unsafe")       # truncation, as astype: every coordinate is >= 0 here
+        np.copyto(i, ey, casting="unsafe")
+        i *= self._wp
+        i += j
+        if ii is not i:
+            np.copyto(ii, i)
+        self._flat.take(ii, out=v32, mode="clip")   # every index is inside the table: "clip" never clips
 
     def __getstate__(self) -> dict:
         """Pickle without the work arrays of :meth:`log_likelihood` (rebuilt on the next call)."""
@@ -920,14 +1073,18 @@ class LikelihoodField:
 
     def _work(self, poses: int, beams: int) -> tuple[NDArray, ...]:
         """Work arrays for blocks of ``beams`` x ``poses`` end points, kept between calls (a few MB)."""
-        key = (beams, poses)
+        key = (beams, poses, self.dtype)
         if getattr(self, "_work_key", None) != key:
             f32, ip = np.float32, np.intp
             small = np.int32 if self._flat.size < 2 ** 31 else ip   # cell indices, exact in 32 bits
-            ex, ey, t, v32 = (np.empty(key, dtype=f32) for _ in range(4))
-            j, i = np.empty(key, dtype=small), np.empty(key, dtype=small)
-            ii = i if small is ip else np.empty(key, dtype=ip)
-            self._work_arrays = (ex, ey, t, j, i, ii, v32, np.empty(key), np.empty((8, poses)))
+            ex, ey, t, v32, bx, by = (np.empty((beams, poses), dtype=f32) for _ in range(6))
+            j, i = np.empty((beams, poses), dtype=small), np.empty((beams, poses), dtype=small)
+            ii = i if small is ip else np.empty((beams, poses), dtype=ip)
+            if self.dtype is np.float32:    # vals: one float32 sum per pose; no float64 copy, no scratch
+                vals, r = np.empty(poses, dtype=f32), np.empty(poses, dtype=f32)
+            else:
+                vals, r = np.empty((beams, poses)), np.empty((8, poses))
+            self._work_arrays = (ex, ey, t, j, i, ii, v32, bx, by, vals, r)
             self._work_key = key
         return self._work_arrays
 

@@ -179,3 +179,83 @@ def test_a_pickled_model_leaves_its_work_arrays_behind_and_scores_alike(grid):
     again = pickle.loads(blob)
     assert "_work_arrays" not in again.__dict__
     np.testing.assert_array_equal(again.log_likelihood(poses, z, a), before)
+
+
+# ------------------------------------------------------------ the float32 opt-in
+def entries(lf: LikelihoodField, poses, ranges, angles) -> np.ndarray:
+    """The float32 table entries ``(N, B)`` that ``log_likelihood`` sums (after the ``z_short`` floor)."""
+    z, a = lf._prepare(ranges, angles)
+    sp = sensor_poses(poses, lf.sensor_offset)
+    g, f32 = lf.grid, np.float32
+    inv = 1.0 / g.resolution
+    bx, by = (z * np.cos(a) * inv).astype(f32), (z * np.sin(a) * inv).astype(f32)
+    c, s = np.cos(sp[:, 2]).astype(f32)[:, None], np.sin(sp[:, 2]).astype(f32)[:, None]
+    x0 = ((sp[:, 0] - g.origin[0]) * inv + lf._pad).astype(f32)[:, None]
+    y0 = ((sp[:, 1] - g.origin[1]) * inv + lf._pad).astype(f32)[:, None]
+    rows_p, cols_p = lf.table.shape
+    ex = np.clip(c * bx - s * by + x0, 0, cols_p - 1)
+    ey = np.clip(s * bx + c * by + y0, 0, rows_p - 1)
+    vals = lf.table[ey.astype(np.int32), ex.astype(np.int32)]
+    if lf.z_short > 0:
+        vals = np.maximum(vals, lf.short_floor(z).astype(f32)[None, :])
+    return vals
+
+
+def float32_bound(lf: LikelihoodField, vals: np.ndarray) -> np.ndarray:
+    """The class docstring's bound: ``temper gamma_(B-1) sum_k |v_k|``, ``gamma_n = n u / (1 - n u)``, ``u = 2^-24``."""
+    u, nb = 2.0 ** -24, vals.shape[1]
+    gamma = max(nb - 1, 0) * u / (1 - max(nb - 1, 0) * u)
+    return lf.temper * gamma * np.abs(vals.astype(np.float64)).sum(axis=1)
+
+
+@pytest.mark.parametrize("kw", CASES.values(), ids=CASES.keys())
+@pytest.mark.parametrize("unknown", ["none", "neutral", "obstacle"])
+def test_float32_sums_stay_within_the_derived_bound(grid, grid_unknown, kw, unknown, monkeypatch):
+    g = grid if unknown == "none" else grid_unknown
+    extra = {"obstacle": dict(unknown_is_obstacle=True)}.get(unknown, {})
+    args = {"z_hit": 0.9, "z_rand": 0.1, **kw, **extra}
+    lf64 = LikelihoodField(g, MAXR, **args)
+    lf32 = LikelihoodField(g, MAXR, dtype=np.float32, **args)
+    np.testing.assert_array_equal(lf32.table, lf64.table)
+    rng = np.random.default_rng(32)
+    poses = cloud(g, 700, rng)
+    worst = 0.0
+    for b, block in [(60, 1 << 16), (130, 3000), (300, 997), (1, 10)]:
+        monkeypatch.setattr(sensors, "_LF_BLOCK", block)
+        z, a = scan(rng, b)
+        ll64, ll32 = lf64.log_likelihood(poses, z, a), lf32.log_likelihood(poses, z, a)
+        vals = entries(lf64, poses, z, a)
+        # the entries are the default path's: their float64 sum is its result to the bit
+        exact = vals.astype(np.float64).sum(axis=1) * (lf64.temper if lf64.temper != 1.0 else 1.0)
+        np.testing.assert_allclose(exact, ll64, rtol=1e-13, atol=1e-12)
+        bound = float32_bound(lf32, vals)
+        assert ll32.dtype == np.float64 and ll32.shape == ll64.shape
+        assert np.all(np.abs(ll32 - ll64) <= bound + 1e-15 * np.abs(ll64)), f"{b} beams"
+        worst = max(worst, float(np.max(np.abs(ll32 - ll64) / np.maximum(bound, 1e-300))))
+        # the bound is tight enough to catch a lost beam: every entry is far larger than it
+        if vals.shape[1] > 1:
+            assert np.all(np.abs(vals).min(axis=1) * lf32.temper > bound)
+    assert 0.0 < worst <= 1.0            # float32 sums really differ from the float64 ones, within the bound
+
+
+def test_float32_held_to_the_per_beam_oracle(grid_unknown):
+    lf = LikelihoodField(grid_unknown, MAXR, z_short=0.1, dtype="float32")
+    rng = np.random.default_rng(7)
+    poses = cloud(grid_unknown, 25, rng)
+    z, a = scan(rng, 45)
+    ref = lf.log_likelihood_reference(poses, z, a)
+    bound = float32_bound(lf, entries(lf, poses, z, a))
+    np.testing.assert_allclose(lf.log_likelihood(poses, z, a), ref, rtol=1e-5, atol=1e-4 + bound.max())
+
+
+def test_float32_option_checked_shown_and_pickled(grid):
+    lf = LikelihoodField(grid, MAXR, dtype=np.float32)
+    assert lf.dtype is np.float32 and repr(lf).endswith("dtype=float32)")
+    assert LikelihoodField(grid, MAXR).dtype is np.float64 and "dtype" not in repr(LikelihoodField(grid, MAXR))
+    for bad in (np.int32, "float16", "no such type", 3, None):
+        with pytest.raises(ValueError, match="dtype must be np.float64"):
+            LikelihoodField(grid, MAXR, dtype=bad)
+    rng = np.random.default_rng(4)
+    poses, (z, a) = cloud(grid, 200, rng), scan(rng, 40)
+    before = lf.log_likelihood(poses, z, a)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(lf)).log_likelihood(poses, z, a), before)
