@@ -476,7 +476,7 @@ if have_intel:    # what the text says about this run, with margins for another 
 # estimate, the best of many hypotheses, is metres off; a few scans later the
 # cloud has gathered on the robot and the state turns *localized* (green). Right: the error against the
 # corrected poses over the run, with the state behind it. The error of the
-# localized scans stays at a few centimetres, under the map's 10 cm cells.
+# localized scans is a few centimetres, its median under the map's 10 cm cells.
 #
 # ## What a real log needs beyond the textbook loop
 #
