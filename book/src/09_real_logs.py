@@ -440,15 +440,17 @@ else:
 # corrected poses — and the error against the corrected poses at the scans it
 # called localized.
 #
-# `localize run` is a thin layer over the library `localize.pipeline`
-# (`read_inputs`, `localize_log`). For pictures we call the library with the
-# same settings and seed, keeping the particles of every scan
-# (`localize.widgets.reallog.log_run`; the cell checks that it gives the
-# command's trajectory), and draw the run over its map with
-# `localize.plot.report.report_figure`:
+# Besides `trajectory.csv` and `summary.json`, the command drew the run over
+# its map in `report.png` (with `localize.plot.report.report_figure`); the
+# next cell shows it. `localize run` is a thin layer over the library
+# `localize.pipeline` (`read_inputs`, `localize_log`). For the replay further
+# down we call the library with the same settings and seed, keeping the
+# particles of every scan (`localize.widgets.reallog.log_run`; the cell checks
+# that it gives the command's trajectory):
 
 # %% tags=["nbval-ignore-output"]
-from localize.plot.report import report_figure  # noqa: E402
+from IPython.display import Image, display  # noqa: E402
+
 from localize.widgets.reallog import log_run, reallog_figure, reallog_widget  # noqa: E402
 
 if have_intel:
@@ -458,8 +460,7 @@ if have_intel:
     intel = log_run(intel_map, intel_log, seed=0)
     written = np.loadtxt(folder / "intel" / "trajectory.csv", delimiter=",", skiprows=1, usecols=(1, 2, 3))
     assert np.allclose(written, intel.trace.poses, atol=1e-5)      # the command's trajectory
-    report_figure(intel_map, intel.trace, intel_log.poses, title="localize run on the Intel log, scans 0-299")
-    plt.show()
+    display(Image(filename=str(folder / "intel" / "report.png")))  # the command's picture, as it wrote it
 
 # %% tags=["remove-cell"]
 if have_intel:    # what the text says about this run, with margins for another machine's round-off
@@ -475,7 +476,7 @@ if have_intel:    # what the text says about this run, with margins for another 
 # estimate, the best of many hypotheses, is metres off; a few scans later the
 # cloud has gathered on the robot and the state turns *localized* (green). Right: the error against the
 # corrected poses over the run, with the state behind it. The error of the
-# localized scans stays at a few centimetres, under the map's 10 cm cells.
+# localized scans is a few centimetres, its median under the map's 10 cm cells.
 #
 # ## What a real log needs beyond the textbook loop
 #
@@ -862,8 +863,8 @@ fig
 # file you write yourself, then with `check.xy_reader(read_xy_log)`, which
 # tries the traps (units, beam order, "no return", line numbers).
 #
-# **3 (experiment).** On the first 60 scans of the simulated log of this chapter
-# (`log.select(slice(0, 60))`), run global
+# **3 (experiment).** On the first 30 scans of the simulated log of this chapter
+# (`log.select(slice(0, 30))`), run global
 # localization (`pipeline.localize_log`, seeds 0 to 3) with `temper=1` and with the
 # default `temper=0.3`, first with 1,000 particles, then with the default
 # number (`n_particles="auto"`). In how many seeds does it converge (within
@@ -924,13 +925,13 @@ print(localize.check.xy_reader(read_xy_log))
 # Solution (click to show)
 # Solution 3.
 converged = {}
-first = log.select(slice(0, 60))
+first = log.select(slice(0, 30))
 for particles in (1000, "auto"):
     for temper in (1.0, 0.3):
         steps = []
         for seed in range(4):
             res = pipeline.localize_log(grid, first, n_particles=particles, rng=np.random.default_rng(seed), temper=temper)
-            steps.append(pipeline.converged_at(np.hypot(*(res.estimates[:, :2] - run.poses[:60, :2]).T), 0.5))
+            steps.append(pipeline.converged_at(np.hypot(*(res.estimates[:, :2] - run.poses[:30, :2]).T), 0.5))
         converged[particles, temper] = sum(s is not None for s in steps)
         print(f"{particles!s:>5} particles, temper {temper:3}: converged in {converged[particles, temper]} of 4 seeds")
 print("'auto' is", pipeline.resolve_particles("auto", grid), "particles on this map")
