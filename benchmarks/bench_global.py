@@ -353,6 +353,34 @@ def calibration(rows: list[dict], min_count: int = 50) -> list[dict]:
     return out
 
 
+def reliability_figure(rows: list[dict], path: Path, min_count: int = 50) -> Path:
+    """The reliability diagram of ``p_localized`` (bins with at least ``min_count`` scans) as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rs = [r for r in rows if "p_n" in r]
+    n = np.sum([r["p_n"] for r in rs], axis=0)
+    mean_p = np.sum([r["p_sum"] for r in rs], axis=0) / np.maximum(n, 1)
+    share = np.sum([r["p_right"] for r in rs], axis=0) / np.maximum(n, 1)
+    keep = n >= min_count
+    fig, ax = plt.subplots(figsize=(4.2, 4.0), constrained_layout=True)
+    ax.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--", label="calibrated")
+    ax.fill_between([0, 1], [-0.1, 0.9], [0.1, 1.1], color="grey", alpha=0.15, label="within 0.1")
+    ax.plot(mean_p[keep], share[keep], "o-", color="C2", label="p_localized")
+    for x, y, c in zip(mean_p[keep], share[keep], n[keep]):
+        ax.annotate(f"{c}", (x, y), textcoords="offset points", xytext=(4, -10), fontsize=7, color="grey")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel("mean p_localized in the bin")
+    ax.set_ylabel(f"share of scans within {STAY_M:g} m")
+    ax.legend(loc="upper left", fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def write_section(text: str, name: str = "bench_global") -> None:
     """Put ``text`` (starting with "## " + ``name``) into RESULTS.md: in place of the old section, or
     before the first benchmark section that sorts after it (the order of run_all.py)."""
@@ -476,6 +504,9 @@ def main(argv=None) -> int:
         "",
     ] + (["Calibration of `p_localized` (bins holding at least 50 scans):", "",
           table(calibration(rows), list(calibration(rows)[0])), ""] if calibration(rows) else []))
+    if args.write and calibration(rows):
+        figure = reliability_figure(rows, HERE / f"{args.section}_reliability.png")
+        text += f"\n![reliability of p_localized]({figure.name})\n"
     print(text)
     if sink:
         sink.close()

@@ -218,11 +218,15 @@ def pose_covariances(res: RunResult) -> NDArray:
 
 def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = None,
                      covariances: NDArray | None = None) -> Path:
-    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state`` (+ reference and error, the smoother's
+    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state,p_localized`` (empty without a map) (+
+    reference and error, the smoother's
     columns), then the pose covariance ``cov_xx ... cov_thetatheta`` (:data:`COV_COLUMNS`; ``covariances``,
     default :func:`pose_covariances`)."""
-    cols = ["time", "x", "y", "theta", "spread", "n_eff", "state"]
+    cols = ["time", "x", "y", "theta", "spread", "n_eff", "state", "p_localized"]
     state = res.state if res.state is not None else np.full(len(res.times), "")
+    p_loc = getattr(res.trace, "p_localized", None) if res.trace is not None else None
+    if p_loc is None or len(p_loc) != len(res.times):
+        p_loc = np.full(len(res.times), np.nan)
     if reference is not None:
         cols += ["ref_x", "ref_y", "ref_theta", "error"]
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
@@ -235,11 +239,18 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
         w.writerow(cols)
         for k in range(len(res.times)):
             row = [f"{res.times[k]:.6f}", *(f"{v:.6f}" for v in res.estimates[k]), f"{res.spread[k]:.4f}",
-                   f"{res.n_eff[k]:.1f}", str(state[k])]
+                   f"{res.n_eff[k]:.1f}", str(state[k]), "" if np.isnan(p_loc[k]) else f"{p_loc[k]:.4f}"]
             if reference is not None:
                 row += [*(f"{v:.6f}" for v in reference[k]), f"{err[k]:.4f}"]
             w.writerow(row + [str(v[k]) for v in extra.values()] + [f"{v:.6g}" for v in cov_terms[k]])
     return path
+
+
+#: What summary.json says the state means when it comes from ``p_localized``.
+STATE_MEANING = ("p_localized: the probability that the estimate is within 1 m of the robot, from the scans' fit to "
+                 "the map there (calibrated at start-up on this map and sensor model) and the particles' own mass "
+                 "near it (localize.reliability.ReliabilityState); localized: p_localized reached 0.9; lost: it was "
+                 "localized and p_localized fell below 0.5; searching: never localized yet")
 
 
 def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, settings: dict,
@@ -274,9 +285,10 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
         out["real_time_factor_note"] = "the log's time stamps are not usable (too coarse or out of order)"
     if res.trace is not None:
         out["state"] = res.trace.state_summary()
-        out["state"]["meaning"] = ("searching: no single, well-fitting hypothesis yet; localized: one cluster holds "
-                                   "most of the weight, is tight, and the scans fit the map there; lost: it was "
-                                   "localized and no longer is (see localize.policies.StateRules)")
+        out["state"]["meaning"] = STATE_MEANING if "final_p_localized" in out["state"] else (
+            "searching: no single, well-fitting hypothesis yet; localized: one cluster holds most of the weight, "
+            "is tight, and the scans fit the map there; lost: it was localized and no longer is (no map: "
+            "see localize.policies.StateRules)")
     chk = getattr(res, "odometry_check", None)
     if chk is not None:
         out["odometry_sign"] = {**chk.summary(), "meaning": (
@@ -372,6 +384,8 @@ def headline(summary: dict) -> str:
         return f"converged (particle spread < 0.5 m) at scan {summary.get('convergence_step')}"
     k = st["first_localized_scan"]
     parts = [f"localized from scan {k}" if k is not None else "NOT localized: still searching at the end"]
+    if st.get("final_p_localized") is not None:
+        parts[0] += f" (p_localized {st['final_p_localized']:.2f} at the end)"
     if st["lost_intervals"]:
         parts.append("lost at scans " + ", ".join(f"{a}-{b}" for a, b in st["lost_intervals"]))
     if k is not None:

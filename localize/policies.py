@@ -211,6 +211,8 @@ class Step:
     off_map: bool = False
     agreed: bool = False
     state: str = "searching"
+    p_localized: float = float("nan")
+    evidence: float = float("nan")
 
     @property
     def updated(self) -> bool:
@@ -625,6 +627,9 @@ class Restart:
 
     def count(self, step: Step, ctx: Context, evidence: MapEvidence, gathered: bool) -> None:
         """Count the step's evidence against the place the cloud is on."""
+        if np.isfinite(step.p_localized):
+            self.count_p(step, ctx, gathered)
+            return
         if step.updated and np.isfinite(step.fit):
             wrong = evidence.wrong(ctx.fits.mean)
             if step.agreed and wrong:
@@ -639,6 +644,18 @@ class Restart:
             self.unjudged += 1
         if ctx.state != "lost":
             self.lost_run = 0
+
+    def count_p(self, step: Step, ctx: Context, gathered: bool) -> None:
+        """Count with ``p_localized`` (:class:`localize.reliability.ReliabilityState`): an update at which the
+        place the cloud agreed or gathered on is more likely wrong than right (``p_localized`` below a half)
+        counts against it, one more likely right resets the count; a lost filter counts whether its cloud
+        agrees or not (outside a probation)."""
+        if not step.updated:
+            return
+        wrong = step.p_localized < 0.5
+        self.poor = self.poor + 1 if (wrong and (step.agreed or gathered)) else 0
+        self.lost_run = self.lost_run + 1 if (ctx.state == "lost" and wrong and ctx.probation is None) else 0
+        self.unjudged = 0
 
     def due(self, mcl: Any, ctx: Context) -> bool:
         """Whether to restart now."""

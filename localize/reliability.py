@@ -3,34 +3,43 @@
 Whether the filter's estimate is right is a hidden binary state, ``right``
 (within ``right_radius`` of the robot) or ``wrong``. The filter never sees the
 truth, but every scan gives evidence: how well the scan fits the map at the
-estimate (:func:`localize.evidence.scan_fit`). The Bayes filter of chapter 1
+estimate (:func:`scan_fits`, as :func:`localize.evidence.scan_fit`). The Bayes filter of chapter 1
 (:mod:`localize.discrete`) turns that evidence into a belief, scan by scan:
 
 * **prediction**: a right estimate stays right with probability
   ``1 - p_lose`` per scan; a wrong one becomes right only with ``p_find``
-  (the particle filter found the robot; the evidence must then say so);
+  (:class:`ReliabilityState` uses 0: the particle filter finds the robot by
+  moving its estimate, and a new place is a new hypothesis);
 * **correction**: ``p(fit | right)`` and ``p(fit | wrong)``, the
   :class:`EvidenceModel`.
 
 The evidence model is not chosen on benchmark logs: :func:`calibrate` learns
 it at start-up from the user's own map and sensor model -- scans simulated at
-poses drawn over the map's free space with the run's beams, range limits and
-noise (the sensor model's own ``sample``), scored at poses a little off (right)
-and at poses a metre or more off or elsewhere in the map (wrong). A map with
-long featureless corridors gives a ``p(fit | wrong)`` with much mass at high
-fits, and the filter then needs more scans to be sure: the model knows the
-building.
+poses drawn over the map's free space from the sensor model's own mixture
+(:func:`simulate_scans`), scored at poses a little off (right: errors from the
+sensor's precision, :func:`converged_error`, up to half the radius,
+:func:`error_levels`) and at wrong poses: a metre or more off, and the place
+elsewhere in the map where the scan fits best (:func:`look_alikes`, the
+look-alike a particle filter would select). A map with look-alike rooms gives
+a ``p(fit | wrong)`` with mass at high fits, and the filter then needs more
+scans to be sure. ``p(fit | right)`` keeps a uniform share :data:`MAP_ERROR`
+for the scans at which the map is wrong (a moved cabinet), so that one poor
+fit never condemns a right estimate.
 
-**Limit, measured.** The wrong poses of :func:`calibrate` are near misses and
-random other places; the wrong places a particle filter settles on are not
-random: it *selects* the place that fits the scans best. In chapter 8's
-kidnapping (office, seed 0) the filter sat 10-12 m from the robot for 16 scans
-in a room that fits the scans at 0.6-0.8 of the beams, as well as the right
-place does, and the filtered probability said 1.0 there. Fit alone cannot tell
-a look-alike; the calibration needs look-alike wrong samples (the best-fitting
-pose a metre or more from each simulated robot) and evidence that compares
-places (the share of weight in competing clusters), before this probability
-replaces the thresholds of :class:`localize.policies.StateRules`.
+:class:`ReliabilityState` is the run driver's state policy built on it
+(``localize run --state probability``; ``run_filter(..., state="probability")``):
+``p_localized`` is the belief times the particle filter's own mass near its
+estimate (the smaller of the weight within the radius and a five-pose probe
+that a featureless corridor cannot pass); *localized* from 0.9, *lost* below 0.5.
+
+**Limits, measured** (``benchmarks/RESULTS.md``, ``bench_global_state_probability``
+and chapter 8). Scan fit alone cannot tell a look-alike: in chapter 8's office
+one kidnapped robot settles on a room 14-18 m away that fits the scans as well
+as the right one and the probability says "sure" there, and a kidnapping to a
+place that fits moderately takes a dozen scans to notice. New places start at
+even odds, which makes the probability cautious (in its middle bins the
+estimate is right more often than it says). These are why the threshold state
+remains the default.
 
 This follows the reliability estimation of Akai et al. (*Reliable Monte Carlo
 localization for mobile robots*, 2023; als_ros), where a classifier's output
@@ -44,10 +53,10 @@ Examples
 >>> lf = LikelihoodField(office(), 8.0, sigma_hit=0.1)
 >>> model = calibrate(office(), lf, np.linspace(-np.pi, np.pi, 36, endpoint=False), np.random.default_rng(0))
 >>> belief = LocalizedBelief(model)
->>> [round(belief.step(0.95), 2) for _ in range(4)]          # scans that fit: sure after a few
-[0.17, 0.51, 0.82, 0.95]
->>> [round(belief.step(0.05), 2) for _ in range(2)]          # scans that fit nowhere near: lost
-[0.07, 0.0]
+>>> [round(belief.step(0.95), 2) for _ in range(3)]          # scans that fit: sure after two
+[0.69, 0.99, 1.0]
+>>> [round(belief.step(0.05), 2) for _ in range(4)]          # scans that fit nowhere: lost after a few
+[0.89, 0.38, 0.05, 0.01]
 """
 
 from __future__ import annotations
@@ -60,12 +69,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import discrete
 from ._checks import check_count, check_positive, check_rng
-from .evidence import scan_fit
-from .geometry import wrap_angle
+from .geometry import compose, relative, wrap_angle
 from .grid import OccupancyGrid
 from .raycast import RayCaster
+from .resample import logsumexp
+from .sensors import sensor_poses
 
-__all__ = ["EvidenceModel", "calibrate", "LocalizedBelief", "reliability_table"]
+__all__ = ["EvidenceModel", "calibrate", "calibration_fits", "simulate_scans", "look_alikes", "converged_error", "error_levels",
+           "LocalizedBelief",
+           "ReliabilityState", "reliability_table"]
+
+#: Share of the scans at a right estimate whose fit the map gets wrong for reasons no sensor model simulates
+#: (a moved cabinet, a crowd, glass, a door left open): the robust part of ``p(fit | right)``, as ``z_rand``
+#: is the robust part of a beam's likelihood (the same 0.1 as the command line's ``z_rand``; not fitted).
+MAP_ERROR = 0.1
 
 #: Index of the two states in a belief ``[p(wrong), p(right)]``.
 WRONG, RIGHT = 0, 1
@@ -85,6 +102,10 @@ class EvidenceModel:
         Calibration samples behind each histogram.
     right_radius : float
         What "right" means (metres).
+    spreads : tuple of float
+        Errors (m per axis) of the right estimates ``p(fit | right)`` was calibrated at (:func:`error_levels`).
+    p_right_at : ndarray (L, K), optional
+        ``p(fit | right)`` at each of them; :attr:`p_right` is their mean.
     """
 
     edges: NDArray[np.float64]
@@ -93,6 +114,8 @@ class EvidenceModel:
     n_right: int
     n_wrong: int
     right_radius: float
+    spreads: tuple = ()
+    p_right_at: NDArray[np.float64] | None = None
 
     def likelihood(self, fit: float) -> NDArray[np.float64]:
         """``[p(fit | wrong), p(fit | right)]``; a NaN fit (the map cannot judge) is no evidence: ``[1, 1]``."""
@@ -111,22 +134,183 @@ def _histogram(values: NDArray, edges: NDArray) -> NDArray:
     return (counts + 1.0) / (counts.sum() + len(counts))       # Laplace: no bin is impossible
 
 
-def calibration_fits(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.random.Generator, *,
-                     n_poses: int = 300, fit_distance: float | None = None,
-                     min_beams: int = 5) -> tuple[NDArray, NDArray]:
-    """The scan fits of :func:`calibrate`: ``(fits at right poses, fits at wrong poses)``, NaN dropped.
+def simulate_scans(grid: OccupancyGrid, sensor: Any, poses: ArrayLike, angles: ArrayLike,
+                   rng: np.random.Generator) -> NDArray[np.float64]:
+    """Scans ``(N, B)`` at ``poses`` drawn from the sensor model's own mixture (PR section 6.3).
 
-    ``n_poses`` true poses are drawn over the free space; the sensor model
-    simulates a scan at each (``sensor.sample``). The scan is scored
+    Each beam is a hit (the ray-cast range plus Gaussian noise of ``sigma_hit``)
+    with weight ``z_hit``, a short reading (exponential below the cast range,
+    rate ``lambda_short``; something the map does not show) with ``z_short``, a
+    random reading (uniform up to ``max_range``) with ``z_rand``, or a max-range
+    reading with ``z_max``; a ray that hits nothing reads ``max_range``. The
+    weights are the model's (missing ones count as 0), so the calibration sees
+    as much clutter as the user's sensor model expects.
 
-    * at the true pose moved as far as a converged filter's estimate is off:
-      Gaussian errors of half the fit distance in position, and in heading the
-      angle under which half the fit distance is seen at the scans' median
-      range (right);
-    * at the true pose moved by 1-4 m with a heading error of up to 0.5 rad (a
-      near miss), and at another free pose (a look-alike elsewhere): wrong.
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> from localize.sensors import LikelihoodField
+    >>> lf = LikelihoodField(office(), 8.0, sigma_hit=0.1)
+    >>> z = simulate_scans(office(), lf, [[3.0, 3.0, 0.0]], np.linspace(-1, 1, 5), np.random.default_rng(0))
+    >>> z.shape, bool(np.all((z >= 0) & (z <= 8.0)))
+    ((1, 5), True)
     """
     rng = check_rng(rng)
+    a = np.asarray(angles, dtype=float)
+    max_range = float(sensor.max_range)
+    offset = np.asarray(getattr(sensor, "sensor_offset", np.zeros(3)), dtype=float)
+    cast = RayCaster(grid, max_range, method="march").cast(sensor_poses(np.atleast_2d(poses), offset), a)
+    w = np.array([float(getattr(sensor, name, 0.0) or 0.0) for name in ("z_hit", "z_short", "z_rand", "z_max")])
+    w = w / w.sum() if w.sum() > 0 else np.array([1.0, 0.0, 0.0, 0.0])
+    kind = rng.choice(4, size=cast.shape, p=w)
+    sigma = float(getattr(sensor, "sigma_hit", 0.2))
+    lam = float(getattr(sensor, "lambda_short", 0.5) or 0.5)
+    u = rng.random(cast.shape)
+    short = -np.log1p(u * np.expm1(-lam * cast)) / lam          # exponential truncated at the cast range
+    z = np.choose(kind, [cast + rng.normal(0.0, sigma, cast.shape), short, u * max_range,
+                         np.full(cast.shape, max_range)])
+    z = np.where(cast >= max_range, max_range, z)
+    return np.clip(z, 0.0, max_range)
+
+
+def look_alikes(grid: OccupancyGrid, sensor: Any, truth: NDArray, scans: NDArray, angles: NDArray,
+                rng: np.random.Generator, radius: float, n_places: int = 150, n_headings: int = 12,
+                n_best: int = 4, n_refine: int = 32) -> NDArray[np.float64]:
+    """For each true pose, the pose at least ``radius`` away where its scan scores best: a filter's wrong answer.
+
+    A particle filter does not settle on a random wrong place; it selects the
+    place whose look fits the scans best. This searches for it as the filter
+    would: the sensor model's log-likelihood of the scan at ``n_places`` free
+    positions x ``n_headings`` headings, then ``n_refine`` poses scattered
+    around each of the ``n_best`` best (half the search's spacing and half a heading step),
+    keeping every candidate at least ``radius`` from the truth.
+    """
+    out = np.empty_like(truth)
+    step = 2.0 * np.pi / n_headings
+    for i in range(len(truth)):
+        ok = np.isfinite(scans[i]) & (scans[i] < float(sensor.max_range))
+        if not ok.any():
+            out[i] = grid.sample_free(1, rng)[0]
+            continue
+        xy = grid.sample_free(n_places, rng)[:, :2]
+        xy = xy[np.hypot(*(xy - truth[i, :2]).T) >= radius]
+        if len(xy) == 0:
+            out[i] = np.nan
+            continue
+        th = rng.uniform(-np.pi, np.pi) + step * np.arange(n_headings)
+        cand = np.column_stack([np.repeat(xy, n_headings, axis=0), np.tile(th, len(xy))])
+        ll = sensor.log_likelihood(cand, scans[i][ok], angles[ok])
+        best = cand[np.argsort(ll)[-n_best:]]
+        spread = np.sqrt(grid.width_m * grid.height_m / max(n_places, 1))
+        near = (np.repeat(best, n_refine, axis=0)
+                + rng.normal(0.0, 1.0, (n_best * n_refine, 3)) * [0.5 * spread, 0.5 * spread, 0.5 * step])
+        near = near[(np.hypot(*(near[:, :2] - truth[i, :2]).T) >= radius) & grid.is_free(near[:, :2])]
+        cand = np.vstack([best, near])
+        out[i] = cand[int(np.argmax(sensor.log_likelihood(cand, scans[i][ok], angles[ok])))]
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
+
+
+def scan_fits(caster: RayCaster, poses: NDArray, offset: NDArray, scans: NDArray, valid: NDArray, angles: NDArray,
+              fit_d: float, min_beams: int, short_unjudged: bool = False) -> NDArray[np.float64]:
+    """:func:`localize.evidence.scan_fit` of scan ``i`` at pose ``i`` for every ``i``, in one ray cast.
+
+    ``valid (N, B)`` marks the readings to judge; a pose with a NaN gets NaN.
+    With ``short_unjudged``, a reading more than ``fit_d`` *shorter* than the
+    map allows is not judged either: something the map does not show stands
+    in front (a person, a moved cabinet), which says nothing against the pose;
+    only a reading that agrees or one that passed through a mapped wall counts.
+
+    Examples
+    --------
+    >>> from localize.evidence import scan_fit
+    >>> from localize.maps import office
+    >>> g = office()
+    >>> rc = RayCaster(g, 8.0, method="march")
+    >>> a = np.linspace(-1.5, 1.5, 31)
+    >>> poses = np.array([[3.0, 3.0, 1.0], [4.5, 3.0, 1.0]])
+    >>> z = rc.cast(poses[:1], a)
+    >>> f = scan_fits(rc, poses, np.zeros(3), np.vstack([z, z]), np.ones((2, 31), bool), a, 0.2, 5)
+    >>> float(f[0]) == scan_fit(rc, poses[0], np.zeros(3), z[0], a, 0.2, 5), bool(f[1] < 0.5)
+    (True, True)
+    """
+    ok_pose = np.all(np.isfinite(poses), axis=1)
+    out = np.full(len(poses), np.nan)
+    if not ok_pose.any():
+        return out
+    sp = sensor_poses(poses[ok_pose], offset)
+    expected = caster.cast(sp, angles)
+    judged = valid[ok_pose].copy()
+    g = caster.grid
+    if g.unknown.any():
+        th = sp[:, 2:3] + angles[None, :]
+        reach = expected + 0.5 * g.resolution
+        hit = np.stack([sp[:, 0:1] + reach * np.cos(th), sp[:, 1:2] + reach * np.sin(th)], axis=-1).reshape(-1, 2)
+        cells = g.world_to_cell(hit, outside="clip")
+        known = (~g.unknown[cells[:, 0], cells[:, 1]] & g.contains(hit)).reshape(expected.shape)
+        judged &= known
+    with np.errstate(invalid="ignore"):
+        if short_unjudged:
+            judged &= scans[ok_pose] >= expected - fit_d
+        agree = judged & (np.abs(scans[ok_pose] - expected) <= fit_d)
+    n_judged = judged.sum(axis=1)
+    fit = np.where(n_judged >= min_beams, agree.sum(axis=1) / np.maximum(n_judged, 1), np.nan)
+    out[ok_pose] = fit
+    return out
+
+
+def converged_error(sensor: Any, n_beams: int) -> float:
+    """Standard deviation (metres, per axis) of a converged filter's position: ``sigma_hit / sqrt(T * B)``.
+
+    A scan of ``B`` scored beams (the sensor's ``max_beams`` of the scan's ``n_beams``), each with noise
+    ``sigma_hit``, tempered by ``T`` (the model counts it as ``T * B`` independent readings), pins a
+    position to about this: the posterior's spread under the filter's own sensor model.
+
+    Examples
+    --------
+    >>> class LF:
+    ...     sigma_hit, temper, max_beams = 0.3, 0.3, 30
+    >>> round(converged_error(LF(), 180), 3)        # 0.3 / sqrt(9)
+    0.1
+    """
+    b = int(n_beams)
+    m = getattr(sensor, "max_beams", None)
+    if m is not None:
+        b = min(b, int(m))
+    t = float(getattr(sensor, "temper", 1.0) or 1.0)
+    return float(float(getattr(sensor, "sigma_hit", 0.2)) / np.sqrt(max(1.0, t * b)))
+
+
+@dataclass(frozen=True)
+class _Sample:
+    """Simulated scans at free poses and the fits of the wrong poses: what every level of ``right`` shares."""
+
+    truth: NDArray
+    scans: NDArray
+    valid: NDArray
+    angles: NDArray
+    typical: float
+    caster: RayCaster
+    offset: NDArray
+    fit_d: float
+    min_beams: int
+    short_unjudged: bool
+    f_wrong: NDArray
+
+    def right_fits(self, error: float, rng: np.random.Generator) -> NDArray:
+        """Fits at the true poses moved by Gaussian errors of ``error`` (m per axis; heading: seen at the median
+        range), NaN dropped."""
+        n = len(self.truth)
+        right = self.truth.copy()
+        right[:, :2] += rng.normal(0.0, error, (n, 2))
+        right[:, 2] = wrap_angle(right[:, 2] + rng.normal(0.0, error / max(self.typical, error), n))
+        f = scan_fits(self.caster, right, self.offset, self.scans, self.valid, self.angles, self.fit_d,
+                      self.min_beams, self.short_unjudged)
+        return f[np.isfinite(f)]
+
+
+def _sample(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.random.Generator, n_poses: int,
+            fit_distance: float | None, radius: float, min_beams: int, short_unjudged: bool) -> _Sample:
     n = check_count(n_poses, "n_poses")
     a = np.asarray(angles, dtype=float)
     max_range = float(sensor.max_range)
@@ -135,53 +319,92 @@ def calibration_fits(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: n
     fit_d = 2.0 * float(getattr(sensor, "sigma_hit", 0.2)) if fit_distance is None else float(fit_distance)
     caster = RayCaster(grid, max_range, method="march")
     truth = grid.sample_free(n, rng)
-    scans = np.asarray(sensor.sample(truth, a, rng), dtype=float)
+    scans = simulate_scans(grid, sensor, truth, a, rng)
+    valid = np.isfinite(scans) & (scans > lo) & (scans < max_range)
+    typical = float(np.median(scans[valid])) if valid.any() else max_range
+    r = np.sqrt(rng.uniform(radius ** 2, (4.0 * radius) ** 2, n))
+    phi = rng.uniform(-np.pi, np.pi, n)
+    near = truth + np.column_stack([r * np.cos(phi), r * np.sin(phi), rng.uniform(-0.5, 0.5, n)])
+    alike = look_alikes(grid, sensor, truth, np.where(valid, scans, np.inf), a, rng, radius)
+    f_wrong = np.concatenate([scan_fits(caster, near, offset, scans, valid, a, fit_d, min_beams, short_unjudged),
+                              scan_fits(caster, alike, offset, scans, valid, a, fit_d, min_beams, short_unjudged)])
+    return _Sample(truth, scans, valid, a, typical, caster, offset, fit_d, int(min_beams), bool(short_unjudged),
+                   f_wrong[np.isfinite(f_wrong)])
 
-    def moved(lo_m: float, hi_m: float, heading: float) -> NDArray:
-        """The true poses moved by lo_m..hi_m metres (uniform over the ring) and up to ``heading`` radians."""
-        r = np.sqrt(rng.uniform(lo_m ** 2, hi_m ** 2, n))
-        phi = rng.uniform(-np.pi, np.pi, n)
-        out = truth.copy()
-        out[:, 0] += r * np.cos(phi)
-        out[:, 1] += r * np.sin(phi)
-        out[:, 2] = wrap_angle(out[:, 2] + rng.uniform(-heading, heading, n))
-        return out
 
-    ok_all = np.isfinite(scans) & (scans > lo) & (scans < max_range)
-    typical = float(np.median(scans[ok_all])) if ok_all.any() else max_range
-    right = truth.copy()
-    right[:, :2] += rng.normal(0.0, 0.5 * fit_d, (n, 2))
-    right[:, 2] = wrap_angle(right[:, 2] + rng.normal(0.0, 0.5 * fit_d / max(typical, fit_d), n))
-    near = moved(1.0, 4.0, 0.5)
-    elsewhere = grid.sample_free(n, rng)
+def calibration_fits(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.random.Generator, *,
+                     n_poses: int = 300, fit_distance: float | None = None, radius: float = 1.0,
+                     min_beams: int = 5, short_unjudged: bool = False,
+                     error: float | None = None) -> tuple[NDArray, NDArray]:
+    """The scan fits of :func:`calibrate`: ``(fits at right poses, fits at wrong poses)``, NaN dropped.
 
-    def fits(poses: NDArray) -> NDArray:
-        out = np.full(n, np.nan)
-        for i in range(n):
-            ok = np.isfinite(scans[i]) & (scans[i] > lo) & (scans[i] < max_range)
-            out[i] = scan_fit(caster, poses[i], offset, scans[i][ok], a[ok], fit_d, min_beams)
-        return out
+    ``n_poses`` true poses are drawn over the free space and a scan simulated
+    at each from the sensor model's own mixture (:func:`simulate_scans`). The
+    scan is scored (:func:`scan_fits`, as :class:`localize.policies.MapEvidence` scores the run's scans)
 
-    f_right = fits(right)
-    f_wrong = np.concatenate([fits(near), fits(elsewhere)])
-    return f_right[np.isfinite(f_right)], f_wrong[np.isfinite(f_wrong)]
+    * at the true pose moved as far as a right estimate is off (right):
+      Gaussian errors of ``error`` metres in x and y (default
+      :func:`converged_error`), and in heading the angle under which it is
+      seen at the scans' median range;
+    * wrong, half and half: at the true pose moved by ``radius`` to 4 times
+      ``radius`` with a heading error of up to 0.5 rad (a filter carried
+      away by its odometry), and at the place at least ``radius`` away where
+      the scan scores best (:func:`look_alikes`: a filter that settled on a
+      look-alike).
+    """
+    rng = check_rng(rng)
+    s = _sample(grid, sensor, angles, rng, n_poses, fit_distance, radius, min_beams, short_unjudged)
+    e = converged_error(sensor, s.angles.size) if error is None else check_positive(error, "error", "metres")
+    return s.right_fits(e, rng), s.f_wrong
+
+
+def error_levels(sensor: Any, n_beams: int, radius: float) -> tuple[float, ...]:
+    """The errors (m per axis) of right estimates at which ``p(fit | right)`` is calibrated:
+    :func:`converged_error` doubled as long as it stays within half of ``radius``.
+
+    Examples
+    --------
+    >>> class LF:
+    ...     sigma_hit, temper, max_beams = 0.3, 0.3, 30
+    >>> [round(e, 2) for e in error_levels(LF(), 180, 1.0)]
+    [0.1, 0.2, 0.4]
+    """
+    e = converged_error(sensor, n_beams)
+    levels = [e]
+    while levels[-1] * 2.0 <= 0.5 * radius:
+        levels.append(levels[-1] * 2.0)
+    return tuple(levels)
 
 
 def calibrate(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.random.Generator, *,
-              n_poses: int = 300, n_bins: int = 10, right_radius: float = 1.0, **kwargs: Any) -> EvidenceModel:
+              n_poses: int = 300, n_bins: int = 10, right_radius: float = 1.0, map_error: float = MAP_ERROR,
+              fit_distance: float | None = None, min_beams: int = 5, short_unjudged: bool = False) -> EvidenceModel:
     """The :class:`EvidenceModel` of this map and sensor, from simulated scans (see :func:`calibration_fits`).
 
-    Takes a second or two for a few hundred poses; ``kwargs`` go to :func:`calibration_fits`.
+    ``p(fit | right)`` is the mean of its calibrations at the errors of :func:`error_levels`: how far a
+    right estimate is off is not known (a cloud that stood still for a while claims less spread than its
+    error), anywhere from the sensor's precision to half the radius, each doubling as likely (a log-uniform
+    prior on the error's scale). The simulation knows only the disagreement the sensor model expects; ``p(fit | right)`` is
+    mixed with a uniform fit with weight ``map_error`` (:data:`MAP_ERROR`), the scans at which the map is
+    wrong about what the robot sees, so that no single poor fit condemns a right estimate.
+
+    Takes a second or two for a few hundred poses.
     """
     check_positive(right_radius, "right_radius", "metres")
-    f_right, f_wrong = calibration_fits(grid, sensor, angles, rng, n_poses=n_poses, **kwargs)
-    if f_right.size < 10 or f_wrong.size < 10:
-        raise ValueError(f"calibration found too few scans the map can judge ({f_right.size} right, {f_wrong.size} "
-                         "wrong): the map's free space is tiny or mostly unknown")
+    rng = check_rng(rng)
+    s = _sample(grid, sensor, angles, rng, n_poses, fit_distance, right_radius, min_beams, short_unjudged)
+    levels = error_levels(sensor, s.angles.size, right_radius)
+    f_rights = [s.right_fits(e, rng) for e in levels]
+    if min(f.size for f in f_rights) < 10 or s.f_wrong.size < 10:
+        raise ValueError(f"calibration found too few scans the map can judge ({f_rights[0].size} right, "
+                         f"{s.f_wrong.size} wrong): the map's free space is tiny or mostly unknown")
     edges = np.linspace(0.0, 1.0, int(n_bins) + 1)
     edges[-1] = 1.0 + 1e-9                      # a perfect fit of 1.0 falls in the last bin
-    return EvidenceModel(edges, _histogram(f_right, edges), _histogram(f_wrong, edges), int(f_right.size),
-                         int(f_wrong.size), float(right_radius))
+    uniform = np.diff(np.minimum(edges, 1.0))
+    p_rights = np.array([(1.0 - map_error) * _histogram(f, edges) + map_error * uniform for f in f_rights])
+    return EvidenceModel(edges, p_rights.mean(axis=0), _histogram(s.f_wrong, edges),
+                         int(sum(f.size for f in f_rights)), int(s.f_wrong.size), float(right_radius), levels,
+                         p_rights)
 
 
 class LocalizedBelief:
@@ -198,13 +421,18 @@ class LocalizedBelief:
         found the robot); the evidence then has to say so.
     prior : float
         ``p_localized`` before the first scan (a global localization starts knowing nothing).
+    weight : float
+        Exponent on each scan's likelihood: consecutive scans of one place see the same walls, so they are
+        not independent evidence (as the beams of one scan are not: the sensor model's ``temper``).
     """
 
-    def __init__(self, model: EvidenceModel, p_lose: float = 0.01, p_find: float = 0.05, prior: float = 0.0) -> None:
+    def __init__(self, model: EvidenceModel, p_lose: float = 0.01, p_find: float = 0.05, prior: float = 0.0,
+                 weight: float = 1.0) -> None:
         for name, v in (("p_lose", p_lose), ("p_find", p_find), ("prior", prior)):
             if not 0.0 <= float(v) <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1]; got {v!r}")
         self.model = model
+        self.weight = float(weight)
         self.transition = np.array([[1.0 - p_find, p_find], [p_lose, 1.0 - p_lose]])   # rows: from wrong, right
         self.belief = np.array([1.0 - prior, prior])
 
@@ -213,10 +441,18 @@ class LocalizedBelief:
         """The current probability that the estimate is right."""
         return float(self.belief[RIGHT])
 
+    def predict(self) -> None:
+        """One scan ahead: the transition."""
+        self.belief = self.belief @ self.transition
+
+    def correct(self, fit: float) -> None:
+        """Bayes' rule with the scan's fit (NaN: no evidence), the likelihood raised to ``weight``."""
+        self.belief = discrete.update(self.belief, self.model.likelihood(fit) ** self.weight)
+
     def step(self, fit: float) -> float:
         """Predict one scan ahead, then correct with the scan's fit (NaN: no correction); returns ``p``."""
-        self.belief = self.belief @ self.transition
-        self.belief = discrete.update(self.belief, self.model.likelihood(fit))
+        self.predict()
+        self.correct(fit)
         return self.p
 
 
@@ -244,3 +480,188 @@ def reliability_table(p: ArrayLike, right: ArrayLike, n_bins: int = 10, min_coun
             rows.append((float(edges[b]), float(edges[b + 1]), int(sel.sum()), float(p[sel].mean()),
                          float(right[sel].mean())))
     return rows
+
+
+class ReliabilityState:
+    """The run's *searching* / *localized* / *lost* state from ``p_localized``, a calibrated probability.
+
+    At every step of :func:`localize.runloop.run`, ``p_localized`` is the
+    probability that the estimate lies within ``right_radius`` of the robot,
+    the product of two factors:
+
+    * ``b``: the probability that the place the filter chose is the robot's
+      place, a :class:`LocalizedBelief` over the scans' fits to the map there,
+      with the :class:`EvidenceModel` calibrated at the first scan on this
+      map and this sensor model (:func:`calibrate`; the scan's own beam
+      angles). A new place is a new hypothesis: when the estimate moves by
+      more than ``right_radius`` beyond what the odometry explains (another
+      cluster won), the belief starts again from even odds;
+    * ``m``: the filter's own mass near its estimate, the smaller of the share
+      of the weight within ``right_radius`` of it and the share the scan itself
+      gives the estimate against the estimate moved by ``probe_shift`` metres
+      forwards, backwards, left and right under the sensor model (a cloud that
+      resampling alone shrank onto one stretch of a featureless corridor has
+      all its weight there, but the scan fits every stretch alike).
+
+    The state is derived from it: ``localized`` once ``p_localized`` reaches
+    ``localized_at``; a localized filter turns ``lost`` when it falls below
+    ``lost_below`` (or every particle failed); ``lost`` and ``searching``
+    (never localized yet) turn ``localized`` again at ``localized_at``.
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+        The map.
+    sensor : range sensor model
+        The filter's model (its mixture weights, noise and range limits shape the calibration).
+    right_radius : float
+        What "right" means (metres).
+    p_change : float
+        Per scan, the chance that a right place becomes wrong (the robot slips or is carried away) without
+        the estimate jumping (``p_lose`` of :class:`LocalizedBelief`). A wrong place never becomes right
+        by itself (``p_find`` 0): the filter finds the robot by moving its estimate to another place, and
+        that starts a new hypothesis; without evidence the probability only falls.
+    localized_at, lost_below : float
+        The documented thresholds on ``p_localized``.
+    probe_shift : float
+        Metres; 0 leaves the probe out.
+    seed : int
+        Seed of the calibration's own generator (the filter's random stream is not touched).
+    model : EvidenceModel, optional
+        A calibration made beforehand (default: made at the first scan).
+    """
+
+    def __init__(self, grid: OccupancyGrid, sensor: Any, *, right_radius: float = 1.0, p_change: float = 0.01,
+                 localized_at: float = 0.9, lost_below: float = 0.5, probe_shift: float = 1.0, seed: int = 0,
+                 model: EvidenceModel | None = None, fit_distance: float | None = None,
+                 evidence_weight: float = 1.0) -> None:
+        if not 0.0 <= lost_below <= localized_at <= 1.0:
+            raise ValueError(f"need 0 <= lost_below <= localized_at <= 1; got {lost_below!r}, {localized_at!r}")
+        self.grid, self.sensor = grid, sensor
+        self.radius, self.p_change = check_positive(right_radius, "right_radius", "metres"), float(p_change)
+        self.localized_at, self.lost_below = float(localized_at), float(lost_below)
+        self.probe_shift, self.seed, self.model = float(probe_shift), int(seed), model
+        self.fit_distance = fit_distance
+        self.evidence_weight = float(evidence_weight)
+        self.belief: LocalizedBelief | None = None if model is None else self._fresh(model)
+        self.last_pose: NDArray | None = None
+        self.last_p: float | None = None
+        self.probe_ll = np.zeros(5)
+        self.caster = RayCaster(grid, float(sensor.max_range), method="march")
+        self.occupied = grid.occupied
+        self.offset = np.asarray(getattr(sensor, "sensor_offset", np.zeros(3)), dtype=float)
+        self.fit_d = 2.0 * float(getattr(sensor, "sigma_hit", 0.2)) if fit_distance is None else float(fit_distance)
+
+    def _fresh(self, model: EvidenceModel) -> LocalizedBelief:
+        return LocalizedBelief(model, p_lose=self.p_change, p_find=0.0, prior=0.5,
+                               weight=self.evidence_weight)
+
+    def _calibrate(self, angles: NDArray) -> None:
+        self.model = calibrate(self.grid, self.sensor, angles, np.random.default_rng(self.seed),
+                               right_radius=self.radius, fit_distance=self.fit_distance)
+        self.belief = self._fresh(self.model)
+
+    def jumped(self, step: Any) -> bool:
+        """Whether the estimate moved by more than ``right_radius`` beyond what the odometry explains."""
+        if self.last_pose is None or step.pose is None:
+            return True
+        moved = np.zeros(3)
+        if step.u is not None and step.pair is not None:
+            moved = relative(step.pair[0], step.pair[1])
+        expected = compose(self.last_pose, moved)
+        return bool(not np.all(np.isfinite(expected)) or np.hypot(*(step.pose[:2] - expected[:2])) > self.radius)
+
+    def cloud_mass(self, step: Any) -> float:
+        """The share of the weight within ``right_radius`` of the estimate."""
+        particles, log_w = step.cloud
+        w = np.exp(np.asarray(log_w, dtype=float) - np.max(log_w))
+        near = np.hypot(*(particles[:, :2] - step.pose[:2]).T) <= self.radius
+        return float(w[near].sum() / w.sum())
+
+    def probe(self, step: Any) -> None:
+        """Add the scan's log-likelihood at the estimate and at it moved by ``probe_shift`` in four directions."""
+        s = self.probe_shift
+        d = np.array([[0.0, 0.0, 0.0], [s, 0.0, 0.0], [-s, 0.0, 0.0], [0.0, s, 0.0], [0.0, -s, 0.0]])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ll = np.asarray(self.sensor.log_likelihood(compose(step.pose, d), *step.z), dtype=float)
+        if ll.shape == (5,) and np.isfinite(ll[0]):
+            self.probe_ll = self.probe_ll + np.where(np.isfinite(ll), ll, -np.inf)
+
+    @property
+    def probe_mass(self) -> float:
+        """The estimate's posterior against the four moved poses, over the scans since the place was chosen.
+
+        A histogram filter over five hypotheses ("the robot is where the estimate says", or a
+        ``probe_shift`` ahead, behind, left, right of it) with the sensor model: in a featureless corridor
+        the scans never tell the estimate from the poses ahead and behind, and this stays at a third.
+        """
+        if self.probe_shift <= 0:
+            return 1.0
+        return float(np.exp(self.probe_ll[0] - logsumexp(self.probe_ll)))
+
+    def fit(self, step: Any) -> float:
+        """The share of the scan's judged readings that agree with the map at the estimate (:func:`scan_fits`).
+
+        NaN (no evidence) when the map calls the estimate's cell occupied: the evidence model was
+        calibrated on free space, and a robot the map puts inside an obstacle (a cabinet that has moved
+        since the map was made, a wall drawn too thick) casts rays that start in it.
+        """
+        cell = self.grid.world_to_cell(np.asarray(step.pose[:2], dtype=float), outside="flag")
+        if cell[0] >= 0 and self.occupied[cell[0], cell[1]]:
+            return float("nan")
+        if np.isfinite(step.fit):
+            return float(step.fit)                  # MapEvidence scored it already, the same way
+        ranges, angles, valid = step.scan
+        return float(scan_fits(self.caster, np.asarray(step.pose, dtype=float)[None], self.offset, ranges[None],
+                               valid[None], angles, self.fit_d, 5)[0])
+
+    def _new_place(self) -> None:
+        self.belief = self._fresh(self.model)
+        self.probe_ll = np.zeros(5)
+
+    def interrupt(self, ctx: Any) -> None:
+        """A restart: the place is in question again (even odds), and a localized filter is lost now."""
+        if self.model is not None:
+            self._new_place()
+        if ctx.state == "localized":
+            ctx.state = "lost"
+
+    def p_localized(self, step: Any) -> float:
+        """Advance the belief by one step and return ``p_localized``."""
+        if self.model is None and step.scan is not None and step.n_valid > 0:
+            self._calibrate(np.asarray(step.scan[1], dtype=float))
+        if self.belief is None:
+            return 0.0
+        judged = bool(step.updated and step.n_valid > 0)
+        if self.jumped(step):
+            self._new_place()
+        self.last_pose = np.array(step.pose, dtype=float)
+        self.belief.predict()
+        if step.degenerate or step.off_map:
+            self.belief.belief = np.array([1.0, 0.0])
+        elif step.updated and step.scan is not None and step.n_valid > 0:
+            step.evidence = self.fit(step)
+            self.belief.correct(step.evidence)
+            if self.probe_shift > 0 and isinstance(step.z, tuple) and len(step.z) == 2:
+                self.probe(step)
+        p = self.belief.p * min(self.cloud_mass(step), self.probe_mass)
+        if not judged and self.last_p is not None:
+            p = min(p, self.last_p)         # no new evidence, no rise (the cloud's mass only wanders by resampling)
+        self.last_p = p
+        return p
+
+    def update(self, step: Any, ctx: Any) -> str:
+        """The state after this step from its ``p_localized`` (computed here if not yet); sets ``ctx.state``."""
+        prev = ctx.state
+        if not np.isfinite(step.p_localized):
+            step.p_localized = self.p_localized(step)
+        p = step.p_localized
+        cur = prev
+        if p >= self.localized_at:
+            cur = "localized"
+        elif prev == "localized" and (p < self.lost_below or step.degenerate or step.off_map):
+            cur = "lost"
+        ctx.state = cur
+        if cur != prev:
+            ctx.events.append((step.k, f"state {prev} -> {cur} (p_localized {p:.2f})"))
+        return cur

@@ -41,6 +41,7 @@ from .policies import (
     ThresholdState,
     is_scan,
 )
+from .reliability import ReliabilityState
 
 __all__ = ["run", "Policies", "Recorder", "RunTrace", "StateTrack", "MCLTrace", "run_filter", "run_mcl",
            "default_policies"]
@@ -120,6 +121,10 @@ class RunTrace(StateTrack):
     cov : ndarray (T, 3, 3), optional
         Weighted covariance of the best cluster behind each estimate
         (:attr:`localize.estimate.Estimate.cluster_cov`).
+    p_localized : ndarray (T,), optional
+        The probability that the estimate is within a metre of the robot
+        (:class:`localize.reliability.ReliabilityState`; NaN for a run whose state comes from
+        :class:`~localize.policies.ThresholdState`, e.g. without a map).
     """
 
     means: NDArray[np.float64]
@@ -139,6 +144,7 @@ class RunTrace(StateTrack):
     seconds: float
     snapshots: dict = field(default_factory=dict)
     cov: NDArray[np.float64] | None = None
+    p_localized: NDArray[np.float64] | None = None
 
 
     def state_summary(self) -> dict:
@@ -157,7 +163,14 @@ class RunTrace(StateTrack):
             "scans_without_valid_readings": int(np.sum(self.n_valid == 0)),
             "degenerate_updates": int(self.degenerate.sum()),
             "events": [[int(k), str(t)] for k, t in self.events],
+            **self._p_summary(),
         }
+
+    def _p_summary(self) -> dict:
+        p = self.p_localized
+        if p is None or len(p) == 0 or not np.all(np.isfinite(p)):
+            return {}
+        return {"final_p_localized": round(float(p[-1]), 4), "mean_p_localized": round(float(np.mean(p)), 4)}
 
 
 #: The old name of :class:`RunTrace` (what :func:`run_mcl` returned before the run driver was one).
@@ -190,7 +203,7 @@ class Policies:
     expansion: Expansion | None = None
     restart: Restart | None = None
     redraw: Redraw | None = None
-    state: ThresholdState | None = None
+    state: ThresholdState | ReliabilityState | None = None
     ctx: Context = None  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
@@ -255,6 +268,8 @@ class Policies:
         gathered = ctx.state == "searching" and self.rules.gathered(step.estimate)
         if step.updated and np.isfinite(step.fit):
             ctx.fits.add(step.fit)
+        if isinstance(self.state, ReliabilityState):
+            step.p_localized = self.state.p_localized(step)      # "am I localized?": the evidence, weighed
         if self.restart is not None and self.evidence is not None:
             self.restart.count(step, ctx, self.evidence, gathered)
         if self.expansion is not None and self.evidence is not None:
@@ -373,7 +388,8 @@ class Recorder:
         e, st = step.estimate, mcl.status
         self.rows.append((step.pose, e.mean, e.std, e.spread, e.best_weight, step.n_eff, step.n_particles,
                           st.n_injected, st.p_inject, step.updated, st.resampled, step.degenerate, step.n_valid,
-                          step.fit, step.on_map, step.state, e.cov if e.cluster_cov is None else e.cluster_cov))
+                          step.fit, step.on_map, step.state, e.cov if e.cluster_cov is None else e.cluster_cov,
+                          step.p_localized))
         if step.updated:
             self.evaluations += step.n_particles * (int(np.size(step.z[1])) if is_scan(step.z) else 1)
         if step.k in self.keep:
@@ -397,7 +413,8 @@ class Recorder:
                         degenerate=arr[11].astype(bool), n_valid=arr[12].astype(np.int64), fit=arr[13].astype(float),
                         on_map=arr[14].astype(float), state=np.array(cols[15], dtype="<U9"), events=events,
                         beam_evaluations=int(self.evaluations), seconds=float(seconds), snapshots=self.snapshots,
-                        cov=np.array(cols[16], dtype=float).reshape(-1, 3, 3))
+                        cov=np.array(cols[16], dtype=float).reshape(-1, 3, 3),
+                        p_localized=np.array(cols[17], dtype=float))
 
 
 def _check_driver_arguments(recovery_injection: float, skip_short_beams: float,
@@ -417,7 +434,8 @@ def default_policies(mcl: Any, *, grid: OccupancyGrid | None = None, min_motion:
                      max_step: float | None = None, rules: StateRules | None = None, recover: bool = True,
                      recovery_injection: float = 0.0, restart_after: int = 0,
                      expand: tuple[float, float] = (0.0, 0.0), odometry: ArrayLike | None = None,
-                     skip_unknown_beams: bool = False, skip_short_beams: float = 0.0) -> Policies:
+                     skip_unknown_beams: bool = False, skip_short_beams: float = 0.0,
+                     state: str = "thresholds") -> Policies:
     """The policies :func:`run_filter` runs ``mcl`` with, from its arguments (see there).
 
     Examples
@@ -449,7 +467,16 @@ def default_policies(mcl: Any, *, grid: OccupancyGrid | None = None, min_motion:
             p.expansion = Expansion((ex_xy, ex_th))
         if restart_after:
             p.restart = Restart(restart_after, mcl.kld.n_max if mcl.kld is not None else mcl.n)
-    p.state = ThresholdState(sensor, rules, p.evidence)
+    if state not in ("thresholds", "probability"):
+        raise ValueError(f"state must be 'thresholds' or 'probability'; got {state!r}")
+    if state == "probability" and (p.evidence is None or not callable(getattr(sensor, "log_likelihood", None))
+                                   or not np.isfinite(float(getattr(sensor, "max_range", np.inf)))):
+        raise ValueError("state='probability' needs a map (grid) and a range sensor model with a finite max_range "
+                         "and log_likelihood: the probability is calibrated on them; use state='thresholds'")
+    if state == "probability":
+        p.state = ReliabilityState(grid, sensor, fit_distance=rules.fit_distance)
+    else:
+        p.state = ThresholdState(sensor, rules, p.evidence)
     return p
 
 
@@ -473,6 +500,7 @@ def run_filter(
     callback: Callable[[int], None] | None = None,
     skip_unknown_beams: bool = False,
     skip_short_beams: float = 0.0,
+    state: str = "thresholds",
 ) -> RunTrace:
     """The one run driver: filter a sequence of controls and scans, with update gating and an honest state.
 
@@ -605,6 +633,14 @@ def run_filter(
         show is more likely wrong than cluttered, and the scan must be free
         to move the cloud. ``events`` counts the beams left out.
 
+    state : {"thresholds", "probability"}
+        Where the state comes from: the thresholds of ``rules``
+        (:class:`~localize.policies.ThresholdState`, default), or ``p_localized``
+        (:class:`~localize.reliability.ReliabilityState`: a Bayes filter over "the
+        estimate is within 1 m", calibrated on the map and the sensor model; needs
+        ``grid``), which then also drives ``restart_after``. ``p_localized`` of the
+        trace is NaN with thresholds.
+
     Returns
     -------
     RunTrace
@@ -628,6 +664,19 @@ def run_filter(
     ('searching', True, True)
     >>> sorted(tr.state_summary())[:3]
     ['degenerate_updates', 'events', 'final_state']
+
+    With ``state="probability"`` the trace carries ``p_localized``; a robot
+    driving through the office:
+
+    >>> from localize.sim import range_run
+    >>> r = range_run(g, np.random.default_rng(2), n_steps=30, angles=angles, max_range=8.0)
+    >>> from localize.motion import OdometryMotion
+    >>> f = MCL.gaussian(r.poses[0], (0.3, 0.3, 0.1), 2000, OdometryMotion(r.alphas, min_std=0.01), lf,
+    ...                  rng=np.random.default_rng(3), grid=g)
+    >>> tr = run_filter(f, 30, r.control, lambda k: (r.ranges[k], angles), state="probability")
+    >>> s = tr.state_summary()
+    >>> s["final_state"], s["final_p_localized"] >= 0.9, bool(np.hypot(*(tr.poses[-1, :2] - r.poses[-1, :2])) < 0.5)
+    ('localized', True, True)
     """
     t = int(n_steps)
     if t < 1:
@@ -635,7 +684,7 @@ def run_filter(
     policies = default_policies(mcl, grid=grid, min_motion=min_motion, max_step=max_step, rules=rules,
                                 recover=recover, recovery_injection=recovery_injection, restart_after=restart_after,
                                 expand=expand, odometry=odometry, skip_unknown_beams=skip_unknown_beams,
-                                skip_short_beams=skip_short_beams)
+                                skip_short_beams=skip_short_beams, state=state)
     record = Recorder(snapshot_steps, snapshot_particles)
     watch = [record] if callback is None else [record, lambda step, mcl: callback(step.k + 1)]
     t0 = time.perf_counter()

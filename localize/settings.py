@@ -328,6 +328,16 @@ class RunSettings:
         short, every beam is scored: the place is then more likely wrong than cluttered (default {default}: twice
         the 0.5 m within which the cloud counts as agreed, more than its own error explains; 0 scores every
         beam). Example: --skip-short-beams 0""")
+    state: str = setting(
+        "thresholds", "where the searching/localized/lost state comes from: thresholds or probability",
+        _choice("thresholds", "probability"), valid="thresholds or probability",
+        choices=("thresholds", "probability"), cli_help="""
+        'probability': the state comes from p_localized, the probability that the estimate is within 1 m of
+        the robot (a Bayes filter over the scans' fit to the map, calibrated at start-up on this map and
+        sensor model; localized at 0.9, lost below 0.5; restarts when it stays below 0.5), written to
+        trajectory.csv and summary.json; 'thresholds': the fixed rules of localize.policies.StateRules
+        (default {default}; see localize.reliability for what the probability does better and worse).
+        Example: --state probability""")
     occupied_penalty: float = setting(
         5.0, "log-likelihood a particle in an obstacle loses per update (inf: zero weight)", _penalty,
         unit="nats", valid="> 0 or inf", metavar="NATS", cli_help="""
@@ -525,6 +535,7 @@ CLI_GROUPS: dict[str, tuple[str, str]] = {
     "unknown_beams": ("sensor", "unknown-cell beams: skip, score"),
     "skip_short_beams": ("sensor", "skip beams M m short of the map"),
     "occupied_penalty": ("sensor", "penalty of a particle in a wall"),
+    "state": ("recovery", "state from thresholds or probability"),
     "odometry_sign": ("filter", "find reversing: auto, check, trust"),
     "track": ("filter", "start at the log's first true pose"),
     "initial_pose": ("filter", "start around this pose, m and rad"),

@@ -14,7 +14,9 @@ ANGLES = np.linspace(-np.pi, np.pi, 36, endpoint=False)
 
 @pytest.fixture(scope="module")
 def model():
-    return calibrate(office(), LikelihoodField(office(), 8.0, sigma_hit=0.1), ANGLES, np.random.default_rng(0))
+    # map_error 0: the held-out scans below are simulated too, with no map error beyond the sensor model's
+    return calibrate(office(), LikelihoodField(office(), 8.0, sigma_hit=0.1), ANGLES, np.random.default_rng(0),
+                     map_error=0.0)
 
 
 def test_the_evidence_model_separates_right_from_wrong(model):
@@ -27,13 +29,20 @@ def test_the_evidence_model_separates_right_from_wrong(model):
 def test_one_scan_posterior_is_calibrated_on_scans_it_was_not_calibrated_on(model):
     """Held-out simulated scans (another seed): in every bin of p(right | fit) with at least 50 scans, the share
     of right estimates is the bin's mean probability within four standard errors of the bin's share."""
+    from localize.reliability import error_levels
+
     lf = LikelihoodField(office(), 8.0, sigma_hit=0.1)
-    f_right, f_wrong = calibration_fits(office(), lf, ANGLES, np.random.default_rng(1), n_poses=400)
+    f_right, f_wrong = [], None                              # right estimates at every error level, as calibrated
+    for i, e in enumerate(error_levels(lf, ANGLES.size, 1.0)):
+        f_r, f_w = calibration_fits(office(), lf, ANGLES, np.random.default_rng(10 + i), n_poses=80, error=e)
+        f_right.append(f_r)
+        f_wrong = f_w if f_wrong is None else np.concatenate([f_wrong, f_w])
+    f_right = np.concatenate(f_right)
     prior = f_right.size / (f_right.size + f_wrong.size)
     p = np.array([model.posterior(f, prior) for f in np.concatenate([f_right, f_wrong])])
     right = np.r_[np.ones(f_right.size, bool), np.zeros(f_wrong.size, bool)]
     rows = [r for r in reliability_table(p, right, n_bins=10) if r[2] >= 50]
-    assert len(rows) >= 3
+    assert len(rows) >= 2
     for lo, hi, n, mean_p, share in rows:
         assert abs(share - mean_p) <= 4 * np.sqrt(max(mean_p * (1 - mean_p), 0.01) / n), (lo, hi, n, mean_p, share)
     # a wrong formula -- the likelihoods swapped -- is far from calibrated
@@ -61,3 +70,202 @@ def test_calibration_refuses_a_map_that_cannot_judge_any_scan():
     blank = OccupancyGrid(np.where(g.free, 0.0, np.nan), g.resolution, origin=g.origin)
     with pytest.raises(ValueError, match="too few scans the map can judge"):
         calibrate(blank, LikelihoodField(g, 8.0, sigma_hit=0.1), ANGLES, np.random.default_rng(0), n_poses=30)
+
+
+# --------------------------------------------------------------------------- the pieces of the calibration
+def test_batched_fits_equal_the_one_pose_fit_with_unknown_cells_and_bad_poses():
+    from localize.evidence import scan_fit
+    from localize.raycast import RayCaster
+    from localize.reliability import scan_fits
+
+    g = office()
+    d = np.array(g.data, dtype=float)
+    d[20:40, 20:40] = np.nan                                   # an unknown square: beams ending there are not judged
+    g2 = OccupancyGrid(d, g.resolution, origin=g.origin)
+    rc = RayCaster(g2, 8.0, method="march")
+    rng = np.random.default_rng(3)
+    poses = g.sample_free(40, rng)
+    scans = rc.cast(poses + rng.normal(0, 0.3, poses.shape) * [1, 1, 0.1], ANGLES) + rng.normal(0, 0.05, (40, 36))
+    valid = scans < 8.0
+    poses[5] = np.nan
+    got = scan_fits(rc, poses, np.zeros(3), scans, valid, ANGLES, 0.2, 5)
+    want = [scan_fit(rc, poses[i], np.zeros(3), scans[i][valid[i]], ANGLES[valid[i]], 0.2, 5) if i != 5 else np.nan
+            for i in range(40)]
+    np.testing.assert_array_equal(got, want)
+
+
+def test_a_short_reading_says_nothing_against_the_pose_a_long_one_does():
+    from localize.raycast import RayCaster
+    from localize.reliability import scan_fits
+
+    g = office()
+    rc = RayCaster(g, 8.0, method="march")
+    pose = np.array([[3.0, 3.0, 1.0]])
+    z = rc.cast(pose, ANGLES)
+    short, long_ = z.copy(), z.copy()
+    short[0, :18] *= 0.3                                     # half the beams stopped by something unmapped
+    long_[0, :18] = np.minimum(long_[0, :18] + 2.0, 7.9)      # half the beams through mapped walls
+    ok = np.ones((1, 36), bool)
+    f = lambda s, unj: float(scan_fits(rc, pose, np.zeros(3), s, ok, ANGLES, 0.2, 5, short_unjudged=unj)[0])  # noqa: E731
+    assert f(short, True) == 1.0 and f(short, False) == pytest.approx(0.5, abs=0.06)
+    assert f(long_, True) == f(long_, False) <= 0.55
+
+
+def test_simulated_scans_follow_the_sensor_models_mixture():
+    """z_hit 0.6, z_rand 0.4: the share of readings within 3 sigma of the map's range is 0.6 * 0.997 plus the random
+    readings that land there; the tolerance is four binomial standard errors of 36 x 300 beams."""
+    from localize.raycast import RayCaster
+    from localize.reliability import simulate_scans
+
+    g = office()
+    lf = LikelihoodField(g, 8.0, sigma_hit=0.1, z_hit=0.6, z_rand=0.4)
+    poses = g.sample_free(300, np.random.default_rng(4))
+    z = simulate_scans(g, lf, poses, ANGLES, np.random.default_rng(5))
+    cast = RayCaster(g, 8.0, method="march").cast(poses, ANGLES)
+    hit = cast < 8.0
+    near = np.abs(z - cast) <= 0.3
+    expected = 0.6 * 0.9973 + 0.4 * 0.6 / 8.0            # a uniform reading lands in the 0.6 m band 0.6/8 of the time
+    n = int(hit.sum())
+    assert abs(near[hit].mean() - expected) <= 4 * np.sqrt(expected * (1 - expected) / n)
+    assert np.all(z[~hit] == 8.0) or lf.z_rand > 0          # no wall in range: max range unless a random reading
+
+
+def test_look_alikes_are_far_from_the_truth_and_fit_the_scan():
+    """A world of two identical rooms: the best wrong place found for a scan taken in one room is never within the
+    radius, and the scan fits it (in the twin room or elsewhere) as a random place does not."""
+    from localize.raycast import RayCaster
+    from localize.reliability import look_alikes, scan_fits
+
+    room = np.zeros((30, 45))
+    room[[0, -1], :] = 1.0
+    room[:, [0, -1]] = 1.0
+    room[10:15, 12:16] = 1.0                                  # a pillar
+    g = OccupancyGrid(np.hstack([room, room]), 0.1)           # two identical rooms, 4.5 m apart
+    lf = LikelihoodField(g, 6.0, sigma_hit=0.1)
+    rng = np.random.default_rng(6)
+    truth = np.array([[1.0, 0.8, 0.3], [2.8, 1.8, -2.0]])
+    rc = RayCaster(g, 6.0, method="march")
+    scans = rc.cast(truth, ANGLES)
+    alike = look_alikes(g, lf, truth, np.where(scans < 6.0, scans, np.inf), ANGLES, rng, radius=1.0,
+                        n_places=400, n_refine=100)
+    assert np.all(np.hypot(*(alike[:, :2] - truth[:, :2]).T) >= 1.0)
+    fits = scan_fits(rc, alike, np.zeros(3), scans, scans < 6.0, ANGLES, 0.2, 5)
+    assert np.all(fits > 0.7)                     # as a filter's wrong answer would: the scan fits it well
+    # a random wrong place does not: the search is what finds look-alikes
+    rand = g.sample_free(200, np.random.default_rng(7))
+    f_rand = scan_fits(rc, rand, np.zeros(3), np.repeat(scans[:1], 200, 0), np.repeat(scans[:1] < 6.0, 200, 0),
+                       ANGLES, 0.2, 5)
+    assert np.nanmedian(f_rand) < 0.5
+
+
+# --------------------------------------------------------------------------- the state
+class _Step:
+    def __init__(self, k, pose, cloud, *, fit_scan=None, u=None, pair=None):
+        self.k, self.pose, self.cloud, self.u, self.pair = k, np.asarray(pose, float), cloud, u, pair
+        self.degenerate = self.off_map = False
+        self.scan = fit_scan
+        self.n_valid = 0 if fit_scan is None else int(fit_scan[2].sum())
+        self.z = None if fit_scan is None else (fit_scan[0][fit_scan[2]], fit_scan[1][fit_scan[2]])
+        self.p_localized = self.evidence = self.fit = np.nan
+        if cloud is not None:                                   # the best cluster is the whole cloud here
+            w = np.exp(cloud[1] - np.max(cloud[1]))
+            w /= w.sum()
+            sd = np.sqrt(w @ (cloud[0][:, :2] - w @ cloud[0][:, :2]) ** 2)
+            self.estimate = type("E", (), {"spread": float(np.hypot(*sd))})()
+
+    @property
+    def updated(self):
+        return self.z is not None
+
+
+class _Ctx:
+    def __init__(self):
+        self.state, self.events = "searching", []
+
+
+def _scan_at(pose, lf, rng):
+    from localize.reliability import simulate_scans
+
+    z = simulate_scans(lf.grid, lf, np.atleast_2d(pose), ANGLES, rng)[0]
+    return (z, ANGLES, z < lf.max_range)
+
+
+def test_the_state_follows_p_localized_and_a_jump_starts_a_new_hypothesis():
+    from localize.reliability import ReliabilityState
+
+    g = office()
+    lf = LikelihoodField(g, 8.0, sigma_hit=0.1, z_hit=0.9, z_rand=0.1)
+    rng = np.random.default_rng(7)
+    state = ReliabilityState(g, lf, probe_shift=0.0)
+    ctx = _Ctx()
+    truth = np.array([3.0, 3.0, 1.0])
+    tight = (np.tile(truth, (100, 1)) + rng.normal(0, 0.05, (100, 3)), np.full(100, -np.log(100)))
+    ps = []
+    for k in range(8):                                          # the right place, scans that fit
+        st = _Step(k, truth, tight, fit_scan=_scan_at(truth, lf, rng))
+        state.update(st, ctx)
+        ps.append(st.p_localized)
+    assert ctx.state == "localized" and ps[-1] >= 0.9 and ps[0] <= ps[-1]
+    wrong = truth + [3.0, 0.0, 1.5]                             # kidnapped: the estimate stays, the robot is elsewhere
+    ps = []
+    for k in range(8, 16):
+        st = _Step(k, truth, tight, fit_scan=_scan_at(wrong, lf, rng))
+        state.update(st, ctx)
+        ps.append(st.p_localized)
+    assert ctx.state == "lost" and st.p_localized < 0.5 and np.all(np.diff(ps) < 0)   # every poor fit lowers it
+    assert any("localized -> lost" in t for _, t in ctx.events)
+    # a spread cloud: at most its mass near the estimate, whatever the scan says
+    spread = (g.sample_free(100, rng), np.full(100, -np.log(100)))
+    st = _Step(16, truth, spread, fit_scan=_scan_at(truth, lf, rng))
+    state.update(st, ctx)
+    mass = np.mean(np.hypot(*(spread[0][:, :2] - truth[:2]).T) <= 1.0)
+    assert st.p_localized <= mass + 1e-12
+    assert state.jumped(_Step(12, truth + [2.0, 0, 0], tight))            # 2 m with no odometry: a new place
+    assert not state.jumped(_Step(12, truth + [0.3, 0, 0], tight))
+
+
+def test_a_corridor_never_pins_the_estimate():
+    """Scans in a long featureless corridor fit the estimate moved along it as well: the probe's mass stays near a
+    third (estimate, one metre ahead, one behind) however many scans come, and the state never says localized."""
+    from localize.reliability import ReliabilityState
+
+    g = OccupancyGrid.from_ascii("#" * 80 + "\n" + "." * 80 + "\n" + "." * 80 + "\n" + "#" * 80, resolution=0.25)
+    lf = LikelihoodField(g, 6.0, sigma_hit=0.05, z_hit=0.95, z_rand=0.05)
+    rng = np.random.default_rng(8)
+    state = ReliabilityState(g, lf)
+    ctx = _Ctx()
+    pose = np.array([10.0, 0.5, 0.0])
+    tight = (np.tile(pose, (50, 1)), np.full(50, -np.log(50)))
+    for k in range(20):
+        state.update(_Step(k, pose, tight, fit_scan=_scan_at(pose, lf, rng)), ctx)
+    assert 0.2 < state.probe_mass < 0.45 and ctx.state == "searching"
+
+
+def test_no_evidence_from_inside_a_mapped_obstacle():
+    from localize.reliability import ReliabilityState
+
+    g = office()
+    lf = LikelihoodField(g, 8.0, sigma_hit=0.1)
+    state = ReliabilityState(g, lf)
+    wall = np.argwhere(g.occupied)[0]
+    x, y = g.cell_to_world(wall[None])[0] if hasattr(g, "cell_to_world") else (
+        g.origin[0] + (wall[1] + 0.5) * g.resolution, g.origin[1] + (wall[0] + 0.5) * g.resolution)
+    st = _Step(0, [x, y, 0.0], None, fit_scan=_scan_at([3.0, 3.0, 0.0], lf, np.random.default_rng(9)))
+    assert np.isnan(state.fit(st))
+    st = _Step(0, [3.0, 3.0, 0.0], None, fit_scan=_scan_at([3.0, 3.0, 0.0], lf, np.random.default_rng(9)))
+    assert state.fit(st) > 0.7
+
+
+def test_map_error_bounds_the_evidence_against_a_right_estimate():
+    """With the robust part, no fit is more than 1 / (map_error * bin width) times likelier at a wrong place than
+    at a right one (10:1 for 0.1 and ten bins): a moved cabinet cannot condemn a right estimate in one scan."""
+    lf = LikelihoodField(office(), 8.0, sigma_hit=0.1)
+    robust = calibrate(office(), lf, ANGLES, np.random.default_rng(0), map_error=0.1)
+    plain = calibrate(office(), lf, ANGLES, np.random.default_rng(0), map_error=0.0)
+    assert np.max(robust.p_wrong / robust.p_right) <= 1.0 / (0.1 * 0.1)
+    np.testing.assert_allclose(robust.p_right, 0.9 * plain.p_right + 0.1 * 0.1)   # the mixture, bin by bin
+    np.testing.assert_allclose(robust.p_right.sum(), 1.0)
+    # p(fit | right) is the mean over the error levels, and a wider error fits worse
+    np.testing.assert_allclose(plain.p_right, plain.p_right_at.mean(axis=0))
+    centres = 0.5 * (plain.edges[:-1] + plain.edges[1:])
+    assert np.all(np.diff(plain.p_right_at @ centres) < 0)

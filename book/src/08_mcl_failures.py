@@ -470,19 +470,19 @@ plt.show()
 # resampling step. A filter that runs unattended on a robot needs a few more
 # decisions that are not one resampling's business, and the run loop of
 # chapter 7 (`localize.runloop.run`) takes each of them from a **policy**, a
-# small object of `localize.policies` with a test of its own:
+# small object with a test of its own:
 #
 # | policy | asks, at each step | does | where in the loop |
 # |---|---|---|---|
-# | `ThresholdState` | is the cloud agreed on one place, and does the scan fit the map there? | says *searching*, *localized* or *lost* | `p.conclude` |
+# | `ReliabilityState` | how probable is it that the estimate is within a metre of the robot? | `p_localized`, and from it *searching*, *localized* or *lost* | `p.assess`, `p.conclude` |
 # | `Redraw` | did every particle get zero likelihood, or leave the map? is the filter lost? | re-draws every particle; while lost, injects a share at each resampling | `p.intervene`, `p.injection` |
-# | `Restart` + `Probation` | has an agreed cloud's scan not fitted the map for many updates? | adds a fresh uniform cloud beside the old one; the scans pick the winner | `p.intervene` |
+# | `Restart` + `Probation` | has `p_localized` stayed below a half for several updates? | adds a fresh uniform cloud beside the old one; the scans pick the winner | `p.intervene` |
 # | `Expansion` | does the scan not fit the agreed place? | spreads the cloud a little wider (Ueda et al. 2004) | `p.assess` |
 #
 # `localize.runloop.run_filter` assembles them from plain arguments. The same
 # kidnapping as above, with plain MCL (no injection at all) but the filter
-# allowed to restart after three updates whose scans do not fit its place and
-# to inject 20 % while lost:
+# allowed to restart after three updates whose place is more likely wrong than
+# right, and to inject 20 % while lost:
 
 # %%
 from localize.runloop import run_filter  # noqa: E402
@@ -494,37 +494,165 @@ def kidnap_with_policies(seed=0, n_steps=50, n=5000):
     fk = MCL.gaussian(r.poses[0], (0.2, 0.2, 0.1), n, OdometryMotion(r.alphas, min_std=0.01), lf,
                       rng=np.random.default_rng(100 + seed), grid=office)
     tr = run_filter(fk, n_steps, r.control, lambda k: (r.ranges[k], ANGLES), restart_after=3,
-                    recovery_injection=0.2)
+                    recovery_injection=0.2, state="probability")
     return r, tr
 
 
-run_p, tr_p = kidnap_with_policies()
+runs = {seed: kidnap_with_policies(seed) for seed in range(4)}      # four robots; robot 3 first
+run_p, tr_p = runs[3]
 e_p = position_error(tr_p.poses, run_p.poses)
 for k, text in tr_p.events:
     print(f"step {k:2d}: {text[:100]}")
 wrong = np.flatnonzero((tr_p.state == "localized") & (e_p > 1.0))
-stretches = np.split(wrong, np.flatnonzero(np.diff(wrong) > 1) + 1) if wrong.size else []
-print("steps called localized while more than 1 m off:", ", ".join(f"{w[0]}-{w[-1]}" for w in stretches) or "none")
+print("steps called localized while more than 1 m off:", ", ".join(str(k) for k in wrong) or "none")
 print(f"last 5 steps: {', '.join(tr_p.state[-5:])}; error at most {e_p[-5:].max():.1f} m")
-assert "lost" in tr_p.state[KIDNAP:KIDNAP + 10]                   # the filter says it lost the robot ...
+assert "lost" in tr_p.state[KIDNAP:KIDNAP + 3]                    # the filter says it lost the robot at once ...
 assert np.all(tr_p.state[-5:] == "localized") and e_p[-5:].max() < 0.5   # ... and ends found, and says so
-assert len(stretches) == 2 and stretches[0][0] == KIDNAP and e_p[stretches[1]].min() > 5.0   # the text below
+assert wrong.size <= 2 and np.all((wrong >= KIDNAP) & (wrong < KIDNAP + 2))   # only the kidnapping's first steps
+
+# %%
+fig, (ax_e, ax_p) = plt.subplots(2, 1, figsize=(8, 4.2), sharex=True, constrained_layout=True)
+ax_e.semilogy(np.maximum(e_p, 1e-3), color="C0")
+ax_e.axhline(1.0, color="grey", lw=0.8, ls=":")
+ax_e.set_ylabel("position error (m)")
+ax_e.axvline(KIDNAP, color="C3", lw=0.8)
+ax_p.plot(tr_p.p_localized, color="C2")
+for level, name in ((0.9, "localized at"), (0.5, "lost below")):
+    ax_p.axhline(level, color="grey", lw=0.8, ls="--")
+    ax_p.text(len(e_p) - 1, level + 0.02, f"{name} {level}", ha="right", fontsize=8, color="grey")
+ax_p.axvline(KIDNAP, color="C3", lw=0.8)
+ax_p.set_ylim(-0.02, 1.05)
+ax_p.set_ylabel("p_localized")
+ax_p.set_xlabel("step (red: the kidnapping)")
+plt.show()
 
 # %% [markdown]
-# The filter says when it has lost the robot, searches, and ends found, and says
-# so — without ground truth. But look at the two stretches called *localized*
-# while more than a metre off. The first is the price of caution: right after
-# the kidnapping the state waits for a few doubtful scans in a row before it
-# gives up a place it held for long. The second is worse: for several steps the
-# state says *localized* while the estimate is more than five metres off: the
-# place the filter showed (its favourite while the old and the fresh cloud were
-# on probation) met every threshold of `StateRules` — share of the weight,
-# spread, fit of the scans to the map — without being the robot's. A state built from thresholds is only as good as the places
-# the thresholds were chosen on; telling a right answer from a look-alike is
-# the open problem of "am I localized?", and the reason the state deserves a
-# probability rather than a verdict. Chapter 9 adds the policies a real log
-# needs (odometry records that are wrong, a robot that stands still, beams that
-# hit what the map does not show).
+# The filter says when it has lost the robot, searches, and ends found, and
+# says so, without ground truth. The lower panel is the answer to "am I
+# localized?" that the state comes from: a probability, `p_localized`, that
+# drops at the kidnapping, stays low while the filter searches, and rises again
+# only once the scans fit the new place.
+#
+# ## Am I localized? A Bayes filter over the filter
+#
+# Whether the estimate is right (within a metre of the robot, say) is a
+# hidden binary fact, just like the door of chapter 1: the filter never sees
+# the truth, but every scan gives evidence. And a hidden binary fact with
+# evidence over time is exactly what the discrete Bayes filter of chapter 1
+# estimates. `localize.reliability` runs that same filter, `localize.discrete`,
+# over two states, *wrong* and *right*:
+#
+# * **prediction**: a right estimate stays right from one scan to the next
+#   with probability $1 - p_{\text{lose}}$ (0.99); a wrong one does not become
+#   right by itself — the particle filter finds the robot by moving its
+#   estimate somewhere else, and a new place starts a new hypothesis at even
+#   odds;
+# * **correction**: the evidence is the scan's **fit**, the share of its beams
+#   that agree with the range ray-cast in the map from the estimate. Bayes'
+#   rule needs $p(\text{fit} \mid \text{right})$ and
+#   $p(\text{fit} \mid \text{wrong})$.
+#
+# Where do those two come from? Not from constants chosen on some benchmark:
+# the filter **calibrates them at start-up on your map and your sensor
+# model**. It draws poses over the free space, simulates a scan at each from
+# the sensor model's own mixture (hits with `sigma_hit` noise, random and
+# short readings), and scores it at the pose moved by a small error (a right
+# estimate) and at two kinds of wrong places: the pose carried a metre or more
+# away, and the place elsewhere in the map where the scan fits best — the
+# look-alike a particle filter would pick. A map of long featureless
+# corridors gives a $p(\text{fit} \mid \text{wrong})$ with much mass at high
+# fits, and the filter then needs more scans before it is sure.
+
+# %%
+from localize.reliability import calibrate, LocalizedBelief, reliability_table  # noqa: E402
+
+model = calibrate(office, lf, ANGLES, np.random.default_rng(0))
+centres = 0.5 * (model.edges[:-1] + np.minimum(model.edges[1:], 1.0))
+fig, ax = plt.subplots(figsize=(6.5, 2.8), constrained_layout=True)
+ax.bar(centres - 0.02, model.p_right, width=0.04, color="C2", label="p(fit | right)")
+ax.bar(centres + 0.02, model.p_wrong, width=0.04, color="C3", label="p(fit | wrong)")
+ax.set_xlabel("fit: share of the beams that agree with the map")
+ax.set_ylabel("probability")
+ax.legend()
+plt.show()
+ratio = model.p_right / model.p_wrong
+print(f"a scan with fit above 0.8 is {ratio[8:].min():.0f} times or more likelier at a right place; "
+      f"one below 0.1 about {1 / ratio[0]:.0f} times likelier at a wrong one")
+assert ratio[8:].min() > 5 and ratio[0] < 1 / 5
+
+# %% [markdown]
+# Put together, one scan after another, this is chapter 1's filter. Three
+# scans that fit well, then scans that fit nowhere:
+
+# %%
+belief = LocalizedBelief(model, p_lose=0.01, p_find=0.0, prior=0.5)
+trace = [belief.step(fit) for fit in (0.85, 0.9, 0.85, 0.05, 0.05, 0.05, 0.05, 0.05)]
+for fit, p in zip((0.85, 0.9, 0.85, 0.05, 0.05, 0.05, 0.05, 0.05), trace):
+    print(f"fit {fit:.2f} -> p(right) = {p:.3f}")
+below = next(i for i, p in enumerate(trace[3:], 1) if p < 0.5)
+print(f"the poor scans take it below a half after {below}")
+assert trace[2] > 0.99 and 3 <= below <= 5
+
+# %% [markdown]
+# Each poor scan divides the odds by the likelihood ratio of its bin (about
+# seven here), so a belief built on good scans survives one or two poor ones
+# (a person in front of the laser) and gives way after a few: the same
+# arithmetic as the door of chapter 1.
+#
+# The run driver's `ReliabilityState` adds two things the scan's fit cannot
+# know: the particle filter's **own mass** near its estimate (a cloud spread
+# over two rooms is at most half sure of either), and a **probe**: the scan's
+# likelihood at the estimate against the estimate moved a metre forwards,
+# backwards, left and right, summed over the scans since the place was
+# chosen — a five-hypothesis histogram filter of chapter 2. In a featureless
+# corridor the scans never tell the estimate from the poses ahead and behind,
+# and the probe stays near a third. `p_localized` is the belief times the
+# smaller of the two; the state is *localized* once it reaches 0.9 and *lost*
+# when a localized filter's falls below 0.5.
+#
+# **Is it calibrated?** A probability is honest when, of all the steps at
+# which it says 0.8, about 80 % are right. Take the four kidnapped robots
+# and count, in each bin of `p_localized`, how often the estimate really was
+# within a metre:
+
+# %%
+ps, rights = [], []
+for seed, (r_s, tr_s) in runs.items():
+    e_s = position_error(tr_s.poses, r_s.poses)
+    ps.append(tr_s.p_localized)
+    rights.append(e_s <= 1.0)
+    off = np.flatnonzero((tr_s.state == "localized") & (e_s > 1.0))
+    print(f"robot {seed}: {off.size:2d} steps called localized while more than 1 m off"
+          + (f" (steps {off[0]}-{off[-1]}, up to {e_s[off].max():.0f} m)" if off.size else ""))
+ps, rights = np.concatenate(ps), np.concatenate(rights)
+rows = reliability_table(ps, rights, n_bins=5, min_count=1)
+for lo, hi, n_bin, mean_p, share in rows:
+    print(f"p_localized {lo:.1f}-{hi:.1f}: {n_bin:3d} steps, mean p {mean_p:.2f}, right {share:.2f}")
+sure = ps >= 0.9
+print(f"steps with p_localized >= 0.9: {sure.sum()}, of them more than 1 m off: {np.sum(~rights[sure])}")
+off_0 = np.flatnonzero((runs[0][1].state == "localized") & (position_error(runs[0][1].poses, runs[0][0].poses) > 1))
+off_1 = np.flatnonzero((runs[1][1].state == "localized") & (position_error(runs[1][1].poses, runs[1][0].poses) > 1))
+assert off_0.size >= 8 and off_0[0] == KIDNAP                      # robot 0: slow to notice (text below)
+assert np.sum(off_1 > KIDNAP + 5) >= 8                            # robot 1: a look-alike after the search
+assert 0.7 < np.mean(rights[sure]) < 0.97                           # "sure" is mostly, not always, right
+
+# %% [markdown]
+# Two of the four robots show what this probability cannot do yet. Robot 0
+# is carried to a place whose scans fit the map around the old estimate
+# moderately (a third to a half of the beams): evidence the calibration rates
+# only weakly against a right estimate, so `p_localized` falls over a dozen
+# steps instead of two, and the state says *localized* all that while.
+# Robot 1 notices the kidnapping within four steps, searches, and then settles on a
+# look-alike room where the scans fit as well as at the robot's true place; no
+# evidence of the scan's fit can tell the two apart, and the probability says
+# "sure". The right answer there is not a better threshold but more evidence:
+# driving on until a scan sees what differs. This is why the command line
+# keeps the threshold state as its default for now (`localize run --state
+# probability` turns this one on), and `benchmarks/RESULTS.md`
+# (`bench_global_state_probability`) measures both on real logs and maps
+# that neither was chosen on. Chapter 9 adds the policies a real log needs
+# (odometry records that are wrong, a robot that stands still, beams that hit
+# what the map does not show).
 #
 # ## Summary
 #
@@ -539,7 +667,10 @@ assert len(stretches) == 2 and stretches[0][0] == KIDNAP and e_p[stretches[1]].m
 # * **KLD-sampling** spends particles where the belief is uncertain and saves
 #   them when it is not.
 # * The run loop takes the decisions beyond one resampling from **policies**:
-#   the state, re-drawing and injecting while lost, restarting on probation.
+#   re-drawing and injecting while lost, restarting on probation.
+# * **Am I localized?** is a probability, `p_localized`: chapter 1's Bayes
+#   filter over "the estimate is right", with evidence models calibrated on
+#   your own map and sensor model, not on a benchmark.
 #
 # ## Exercises
 #
