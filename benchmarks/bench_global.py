@@ -272,7 +272,7 @@ def state_counts(trace, errors: np.ndarray) -> dict:
     out = {"loc": int(loc.sum()), "loc_off": int(np.sum(loc & (errors > STAY_M))), "near": int(near.sum()),
            "near_loc": int(np.sum(near & loc))}
     p = getattr(trace, "p_localized", None)
-    if p is not None:
+    if p is not None and np.all(np.isfinite(p)):           # NaN: the threshold state has no probability
         p = np.asarray(p, dtype=float)
         k = np.clip((p * P_BINS).astype(int), 0, P_BINS - 1)
         right = errors <= STAY_M

@@ -273,10 +273,14 @@ def test_benchmark_small_version(shared_data, capsys):
                    "--workers", "1"]) == 0
     out = capsys.readouterr().out
     rows = [line for line in out.splitlines() if line.startswith("| intel") or line.startswith("| willow")]
-    assert len(rows) == 2
-    for r in rows:
+    assert len(rows) == 4                              # the runs' table, then what the state said scan by scan
+    for r in rows[:2]:
         cells = [c.strip() for c in r.strip("|").split("|")]
         assert cells[1] == "1" and cells[2].split("/")[1].startswith("1")
+    for r in rows[2:]:
+        cells = [c.strip() for c in r.strip("|").split("|")]
+        assert cells[1] == "120" and int(cells[2]) <= 120       # scans, of them localized
+    assert "Calibration of `p_localized`" not in out     # the default (threshold) state has no p_localized
 
 
 def test_simulated_laser_reports_no_return_where_nothing_is_in_range():
