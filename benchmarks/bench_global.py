@@ -485,6 +485,7 @@ def main(argv=None) -> int:
 
     cmd = "nice python benchmarks/bench_global.py" + "".join(
         f" {a}" for a in (argv if argv is not None else sys.argv[1:]) if a != "--write")
+    quality, calib = state_quality(rows), calibration(rows)
     text = "\n".join([
         f"## {args.section}",
         "",
@@ -500,11 +501,11 @@ def main(argv=None) -> int:
         "",
         "What the state said, scan by scan (every scan of every run judged against the reference):",
         "",
-        table(state_quality(rows), list(state_quality(rows)[0]) if state_quality(rows) else ["log"]),
+        table(quality, list(quality[0]) if quality else ["log"]),
         "",
     ] + (["Calibration of `p_localized` (bins holding at least 50 scans):", "",
-          table(calibration(rows), list(calibration(rows)[0])), ""] if calibration(rows) else []))
-    if args.write and calibration(rows):
+          table(calib, list(calib[0])), ""] if calib else []))
+    if args.write and calib:
         figure = reliability_figure(rows, HERE / f"{args.section}_reliability.png")
         text += f"\n![reliability of p_localized]({figure.name})\n"
     print(text)

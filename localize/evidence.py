@@ -7,7 +7,8 @@ with no ground truth:
 
 * :func:`scan_fit` -- the share of beams whose reading agrees with the range
   ray-cast in the map from the estimate (a wrong place lets beams pass
-  through walls, and the ray cast sees it);
+  through walls, and the ray cast sees it); :func:`scan_fits` for many
+  scans and poses in one ray cast;
 * :func:`expected_fit` -- the share the sensor model itself expects on the
   right pose, the yardstick for :func:`scan_fit`;
 * :func:`pinned` -- whether the scan fits the estimate clearly better than
@@ -33,7 +34,7 @@ from .geometry import compose
 from .grid import OccupancyGrid
 from .sensors import select_beams, sensor_poses
 
-__all__ = ["expected_fit", "scan_fit", "pinned", "free_share", "unexplained_beams", "SHORT_BEAMS_MAX_SHARE"]
+__all__ = ["expected_fit", "scan_fit", "scan_fits", "pinned", "free_share", "unexplained_beams", "SHORT_BEAMS_MAX_SHARE"]
 
 #: :func:`unexplained_beams`' ``short``: when more than this share of a scan's valid beams read short at the
 #: agreed place, none is left out (most of the scan contradicting the map says the place is wrong; a
@@ -101,19 +102,59 @@ def scan_fit(caster: Any, pose: NDArray, offset: NDArray, ranges: NDArray, angle
     """
     if ranges.size < min_beams:
         return float("nan")
-    sp = sensor_poses(np.asarray(pose, dtype=float)[None, :], offset)
-    expected = caster.cast(sp, angles)[0]
+    pose = np.asarray(pose, dtype=float)
+    if not np.all(np.isfinite(pose)):
+        caster.cast(sensor_poses(pose[None, :], offset), angles)   # the caster's error for a pose it cannot cast
+    return float(scan_fits(caster, pose[None, :], offset, np.asarray(ranges)[None, :],
+                           np.ones((1, np.size(ranges)), dtype=bool), angles, fit_d, min_beams)[0])
+
+
+def scan_fits(caster: Any, poses: NDArray, offset: NDArray, scans: NDArray, valid: NDArray, angles: NDArray,
+              fit_d: float, min_beams: int, short_unjudged: bool = False) -> NDArray[np.float64]:
+    """:func:`scan_fit` of scan ``i`` at pose ``i`` for every ``i``, in one ray cast.
+
+    ``valid (N, B)`` marks the readings to judge; a pose with a NaN gets NaN.
+    With ``short_unjudged``, a reading more than ``fit_d`` *shorter* than the
+    map allows is not judged either: something the map does not show stands
+    in front (a person, a moved cabinet), which says nothing against the pose;
+    only a reading that agrees or one that passed through a mapped wall counts.
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> from localize.raycast import RayCaster
+    >>> g = office()
+    >>> rc = RayCaster(g, 8.0, method="march")
+    >>> a = np.linspace(-1.5, 1.5, 31)
+    >>> poses = np.array([[3.0, 3.0, 1.0], [4.5, 3.0, 1.0]])
+    >>> z = rc.cast(poses[:1], a)
+    >>> f = scan_fits(rc, poses, np.zeros(3), np.vstack([z, z]), np.ones((2, 31), bool), a, 0.2, 5)
+    >>> float(f[0]) == scan_fit(rc, poses[0], np.zeros(3), z[0], a, 0.2, 5), bool(f[1] < 0.5)
+    (True, True)
+    """
+    ok_pose = np.all(np.isfinite(poses), axis=1)
+    out = np.full(len(poses), np.nan)
+    if not ok_pose.any():
+        return out
+    sp = sensor_poses(poses[ok_pose], offset)
+    expected = caster.cast(sp, angles)
+    judged = valid[ok_pose].copy()
     g = caster.grid
     if g.unknown.any():
-        a = sp[0, 2] + angles
+        th = sp[:, 2:3] + angles[None, :]
         reach = expected + 0.5 * g.resolution
-        hit = np.column_stack([sp[0, 0] + reach * np.cos(a), sp[0, 1] + reach * np.sin(a)])
+        hit = np.stack([sp[:, 0:1] + reach * np.cos(th), sp[:, 1:2] + reach * np.sin(th)], axis=-1).reshape(-1, 2)
         cells = g.world_to_cell(hit, outside="clip")
-        judged = ~g.unknown[cells[:, 0], cells[:, 1]] & g.contains(hit)
-        if int(judged.sum()) < min_beams:
-            return float("nan")
-        ranges, expected = ranges[judged], expected[judged]
-    return float(np.mean(np.abs(ranges - expected) <= fit_d))
+        known = (~g.unknown[cells[:, 0], cells[:, 1]] & g.contains(hit)).reshape(expected.shape)
+        judged &= known
+    with np.errstate(invalid="ignore"):
+        if short_unjudged:
+            judged &= scans[ok_pose] >= expected - fit_d
+        agree = judged & (np.abs(scans[ok_pose] - expected) <= fit_d)
+    n_judged = judged.sum(axis=1)
+    fit = np.where(n_judged >= min_beams, agree.sum(axis=1) / np.maximum(n_judged, 1), np.nan)
+    out[ok_pose] = fit
+    return out
 
 
 def pinned(sensor: Any, pose: NDArray, z: tuple, shift: float, min_contrast: float, lo_r: float = 0.0,

@@ -69,6 +69,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import discrete
 from ._checks import check_count, check_positive, check_rng
+from .evidence import scan_fits
 from .geometry import compose, relative, wrap_angle
 from .grid import OccupancyGrid
 from .raycast import RayCaster
@@ -208,54 +209,6 @@ def look_alikes(grid: OccupancyGrid, sensor: Any, truth: NDArray, scans: NDArray
         cand = np.vstack([best, near])
         out[i] = cand[int(np.argmax(sensor.log_likelihood(cand, scans[i][ok], angles[ok])))]
     out[:, 2] = wrap_angle(out[:, 2])
-    return out
-
-
-def scan_fits(caster: RayCaster, poses: NDArray, offset: NDArray, scans: NDArray, valid: NDArray, angles: NDArray,
-              fit_d: float, min_beams: int, short_unjudged: bool = False) -> NDArray[np.float64]:
-    """:func:`localize.evidence.scan_fit` of scan ``i`` at pose ``i`` for every ``i``, in one ray cast.
-
-    ``valid (N, B)`` marks the readings to judge; a pose with a NaN gets NaN.
-    With ``short_unjudged``, a reading more than ``fit_d`` *shorter* than the
-    map allows is not judged either: something the map does not show stands
-    in front (a person, a moved cabinet), which says nothing against the pose;
-    only a reading that agrees or one that passed through a mapped wall counts.
-
-    Examples
-    --------
-    >>> from localize.evidence import scan_fit
-    >>> from localize.maps import office
-    >>> g = office()
-    >>> rc = RayCaster(g, 8.0, method="march")
-    >>> a = np.linspace(-1.5, 1.5, 31)
-    >>> poses = np.array([[3.0, 3.0, 1.0], [4.5, 3.0, 1.0]])
-    >>> z = rc.cast(poses[:1], a)
-    >>> f = scan_fits(rc, poses, np.zeros(3), np.vstack([z, z]), np.ones((2, 31), bool), a, 0.2, 5)
-    >>> float(f[0]) == scan_fit(rc, poses[0], np.zeros(3), z[0], a, 0.2, 5), bool(f[1] < 0.5)
-    (True, True)
-    """
-    ok_pose = np.all(np.isfinite(poses), axis=1)
-    out = np.full(len(poses), np.nan)
-    if not ok_pose.any():
-        return out
-    sp = sensor_poses(poses[ok_pose], offset)
-    expected = caster.cast(sp, angles)
-    judged = valid[ok_pose].copy()
-    g = caster.grid
-    if g.unknown.any():
-        th = sp[:, 2:3] + angles[None, :]
-        reach = expected + 0.5 * g.resolution
-        hit = np.stack([sp[:, 0:1] + reach * np.cos(th), sp[:, 1:2] + reach * np.sin(th)], axis=-1).reshape(-1, 2)
-        cells = g.world_to_cell(hit, outside="clip")
-        known = (~g.unknown[cells[:, 0], cells[:, 1]] & g.contains(hit)).reshape(expected.shape)
-        judged &= known
-    with np.errstate(invalid="ignore"):
-        if short_unjudged:
-            judged &= scans[ok_pose] >= expected - fit_d
-        agree = judged & (np.abs(scans[ok_pose] - expected) <= fit_d)
-    n_judged = judged.sum(axis=1)
-    fit = np.where(n_judged >= min_beams, agree.sum(axis=1) / np.maximum(n_judged, 1), np.nan)
-    out[ok_pose] = fit
     return out
 
 
