@@ -25,6 +25,9 @@ jupytext_cm = pytest.importorskip("jupytext.async_contentsmanager")
 from tornado.web import HTTPError  # noqa: E402
 from traitlets.config.loader import PyFileConfigLoader  # noqa: E402
 
+# the lowest-versions CI job (.ci/run, job 3) deselects this module: it checks our own tooling, not numerics
+pytestmark = pytest.mark.tooling
+
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "jupyter_server_config.py"
 

@@ -6,6 +6,9 @@ import pytest
 
 radon = pytest.importorskip("radon.complexity", reason="radon is in the test extra: pip install -e '.[test]'")
 
+# the lowest-versions CI job (.ci/run, job 3) deselects this module: it checks our own tooling, not numerics
+pytestmark = pytest.mark.tooling
+
 ROOT = Path(__file__).resolve().parent.parent
 LIMIT = 25
 

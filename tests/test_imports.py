@@ -14,6 +14,9 @@ from pathlib import Path
 
 import pytest
 
+# the lowest-versions CI job (.ci/run, job 3) deselects this module: it checks our own tooling, not numerics
+pytestmark = pytest.mark.tooling
+
 PACKAGE = Path(__file__).resolve().parent.parent / "localize"
 
 #: Presentation: figures, widgets, the homework's self-checks and the command line. Everything else in

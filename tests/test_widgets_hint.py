@@ -27,6 +27,9 @@ from localize.widgets import maps as wmaps  # noqa: E402
 from localize.widgets import particles as wp  # noqa: E402
 from localize.widgets import sensors as ws  # noqa: E402
 
+# the lowest-versions CI job (.ci/run, job 3) deselects this module: it checks our own tooling, not numerics
+pytestmark = pytest.mark.tooling
+
 
 def _build(factory):
     with contextlib.redirect_stdout(io.StringIO()):       # no frontend: swallow the terminal codes

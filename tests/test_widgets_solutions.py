@@ -17,6 +17,9 @@ import pytest
 jupyter_client = pytest.importorskip("jupyter_client")
 pytest.importorskip("ipykernel")
 
+# the lowest-versions CI job (.ci/run, job 3) deselects this module: it checks our own tooling, not numerics
+pytestmark = pytest.mark.tooling
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
