@@ -6,6 +6,7 @@ import ast
 import csv
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import nbformat
@@ -50,6 +51,26 @@ def graded(tmp_path_factory):
     with open(base / "grades" / "grades.csv", newline="") as f:
         rows = {row["student"]: row for row in csv.DictReader(f)}
     return base, made, rows, r
+
+
+def _grade_all(notebooks: dict[str, nbformat.NotebookNode], folder: Path, limits: Limits | None = None) -> dict:
+    """name -> Grade of each notebook, graded by grade_submission two at a time (as ``grade_class`` does)."""
+    for name, nb in notebooks.items():
+        nbformat.write(nb, folder / f"{name}.ipynb")
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        grades = pool.map(lambda name: grade_submission(folder / f"{name}.ipynb", limits=limits), notebooks)
+        return dict(zip(notebooks, grades))
+
+
+HONEST = ("full", "empty", "wraps", "millimetres", "no_q")
+
+
+@pytest.fixture(scope="module")
+def honest(tmp_path_factory):
+    """kind -> (notebook, Grade) for each honest kind of submission, graded once for the tests below."""
+    notebooks = {kind: filled(*KINDS[kind][:2]) for kind in HONEST}
+    grades = _grade_all(notebooks, tmp_path_factory.mktemp("honest"), Limits(task_s=60))
+    return {kind: (notebooks[kind], grades[kind]) for kind in HONEST}
 
 
 @pytest.mark.slow
@@ -98,15 +119,12 @@ def test_one_feedback_file_per_student(graded):
 
 
 @pytest.mark.slow
-def test_the_grader_and_the_students_own_checks_agree(tmp_path):
+def test_the_grader_and_the_students_own_checks_agree(honest):
     """For each kind of honest submission, every check cell of the notebook gives the grader's verdict and hint."""
     from localize import check
 
-    for kind in ("full", "empty", "wraps", "millimetres", "no_q"):
-        nb = filled(*KINDS[kind][:2])
-        path = tmp_path / f"{kind}.ipynb"
-        nbformat.write(nb, path)
-        grade = grade_submission(path, limits=Limits(task_s=60))
+    for kind in HONEST:
+        nb, grade = honest[kind]
         ns: dict = {}
         reports = {}
         for cell in nb.cells:
@@ -176,19 +194,27 @@ EDGE = {
 }
 
 
+@pytest.fixture(scope="module")
+def edge_grades(tmp_path_factory):
+    """name -> Grade of each EDGE submission, and check.py's modification time before and after grading them all."""
+    before = (ROOT / "localize" / "check.py").stat().st_mtime_ns
+    notebooks = {f"edge{k}": filled(*EDGE[name][:2]) for k, name in enumerate(EDGE)}
+    grades = _grade_all(notebooks, tmp_path_factory.mktemp("edge"),
+                        Limits(submission_s=120, cell_s=3, task_s=30, memory_mb=2048))
+    after = (ROOT / "localize" / "check.py").stat().st_mtime_ns
+    return dict(zip(EDGE, grades.values())), before, after
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(EDGE))
-def test_what_a_submission_breaks_costs_only_that(name, tmp_path):
-    changes, extra, total, note = EDGE[name]
-    before = (ROOT / "localize" / "check.py").stat().st_mtime_ns
-    nb = filled(changes, extra)
-    nbformat.write(nb, tmp_path / "s.ipynb")
-    grade = grade_submission(tmp_path / "s.ipynb", limits=Limits(submission_s=120, cell_s=3, task_s=30,
-                                                                 memory_mb=2048))
+def test_what_a_submission_breaks_costs_only_that(name, edge_grades):
+    _, _, total, note = EDGE[name]
+    grades, before, after = edge_grades
+    grade = grades[name]
     assert grade.total == total, grade.notes
     if note:
         assert grade.notes and grade.notes[0].startswith(note), grade.notes
-    assert (ROOT / "localize" / "check.py").stat().st_mtime_ns == before
+    assert after == before, "grading the EDGE submissions wrote to localize/check.py"
 
 
 def test_the_solutions_are_not_importable_in_the_sandbox(tmp_path):
@@ -224,7 +250,7 @@ def test_a_notebook_that_is_not_json_gets_zero_with_the_reason(tmp_path):
 
 
 @pytest.mark.slow
-def test_otter_grades_like_the_grader(tmp_path):
+def test_otter_grades_like_the_grader(tmp_path, honest):
     """The otter-grader route (otter assign, then otter run without Docker) gives each section the same points."""
     pytest.importorskip("otter", reason="otter-grader is not installed (pip install -e '.[grade]')")
     import json
@@ -235,8 +261,9 @@ def test_otter_grades_like_the_grader(tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
     (zip_path,) = (tmp_path / "dist" / "autograder").glob("*.zip")
     for kind in ("wraps",):  # fifteen sections at full marks, one at zero: both outcomes
+        notebook, grade = honest[kind]
         nb = tmp_path / f"{kind}.ipynb"
-        nbformat.write(filled(*KINDS[kind][:2]), nb)
+        nbformat.write(notebook, nb)
         out = tmp_path / f"out_{kind}"
         out.mkdir()
         r = subprocess.run([*otter, "run", "-a", str(zip_path), "-o", str(out), str(nb)], capture_output=True,
@@ -244,5 +271,4 @@ def test_otter_grades_like_the_grader(tmp_path):
         assert r.returncode == 0, r.stdout + r.stderr
         scores = {t["name"]: t["score"] for t in json.loads((out / "results.json").read_text())["tests"]
                   if "score" in t}
-        grade = grade_submission(nb)
         assert scores == {f"q{s.number}": float(grade.section_points(s)) for s in SECTIONS}, kind
