@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import motion as _motion
 from ._checks import check_alphas, check_positive
-from .geometry import as_poses, wrap_angle
+from .geometry import _wrap_scalar, as_poses, wrap_angle
 from .sensors import ON_LANDMARK, LandmarkModel, range_bearing, range_bearing_jacobian
 
 __all__ = [
@@ -153,7 +153,11 @@ def velocity_jacobians(pose: ArrayLike, u: ArrayLike, dt: float) -> tuple[NDArra
     """
     x, y, th = _pose(pose)
     v, w = _control(u, 2)
-    dt = check_positive(dt, "dt", "seconds")
+    return _velocity_jacobians(th, v, w, check_positive(dt, "dt", "seconds"))
+
+
+def _velocity_jacobians(th: float, v: float, w: float, dt: float) -> tuple[NDArray, NDArray]:
+    """:func:`velocity_jacobians` after its checks (heading ``th``, control ``(v, w)``, ``dt > 0``)."""
     half = 0.5 * w * dt
     s, ds = float(_sinc(np.asarray(half))), float(_dsinc(half))
     c, sn = np.cos(th + half), np.sin(th + half)
@@ -199,10 +203,16 @@ def velocity_noise(u: ArrayLike, dt: float, alphas: ArrayLike) -> NDArray[np.flo
 
 
 def _velocity_process_cov(pose: NDArray, u: NDArray, dt: float, alphas: NDArray) -> tuple[NDArray, NDArray]:
-    G, V = velocity_jacobians(pose, u, dt)
-    M = velocity_noise(u, dt, alphas)
+    """``G`` and ``V M V^T`` (plus the final rotation's variance) for a checked pose, control, ``dt`` and alphas.
+
+    The lean path of the filters' prediction: :func:`velocity_jacobians` and
+    :func:`velocity_noise` without their per-call checks (the filter checked
+    ``alphas`` and ``dt`` once, when it was made, and checks ``u`` at each step).
+    """
+    G, V = _velocity_jacobians(pose[2], u[0], u[1], dt)
+    var_v, var_w, var_gamma = _motion._velocity_variances(u[0], u[1], alphas, "squared")
+    M = np.diag([float(var_v), float(var_w)])
     Q = V @ M @ V.T
-    _, _, var_gamma = _motion.velocity_variances(u[0], u[1], alphas)
     Q[2, 2] += float(var_gamma) * dt**2
     return G, Q
 
@@ -470,7 +480,7 @@ def _residual_z(a, b):
 def _residual_x(a, b):
     d = np.array(a, dtype=float) - b
     flat = d.reshape(-1)
-    flat[2] = wrap_angle(flat[2])
+    flat[2] = _wrap_scalar(float(flat[2]), True)     # wrap_angle of one number, without its numpy overhead
     return d
 
 
@@ -530,7 +540,9 @@ class _GaussianLocalizer:
         if self.motion == "velocity":
             uu = _control(u, 2)
             G, Q = _velocity_process_cov(mean, uu, self.dt, self.alphas)
-            return (lambda x: velocity_motion(x, uu, self.dt)), G, Q
+            v, w, dt = uu[0], uu[1], self.dt
+            # velocity_motion with only the check that matters per call (finite poses): u and dt are checked
+            return (lambda x: _motion._move_velocity(as_poses(x), v, w, dt)), G, Q
         uu = odometry_controls(u)
         G, V = odometry_jacobians(mean, uu)
         Q = V @ odometry_noise(uu, self.alphas) @ V.T
@@ -796,7 +808,8 @@ class UKFLocalizer(_GaussianLocalizer):
         m, c = self._check_belief(mean, cov)
         self.kf.x = m
         self.kf.P = c.copy()
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        self._sigmas_of = None
+        self._refresh_sigmas()
 
     @property
     def mean(self) -> NDArray[np.float64]:
@@ -817,13 +830,32 @@ class UKFLocalizer(_GaussianLocalizer):
             P = (v * np.maximum(w, _MIN_EIGENVALUE)) @ v.T
         self.kf.P = P
 
+    def _refresh_sigmas(self) -> None:
+        """``kf.sigmas_f = sigma_points(kf.x, kf.P)``, computed again only if ``x`` or ``P`` changed.
+
+        The sigma points are a deterministic function of ``(x, P)``: when both
+        are bit for bit those they were last computed from, the stored ones
+        are the ones a new computation would give (one Cholesky factorisation
+        and seven sigma points saved, the lean path of a step).
+        """
+        x, P = self.kf.x, self.kf.P
+        seen = self._sigmas_of
+        if seen is not None and np.array_equal(seen[0], x) and np.array_equal(seen[1], P):
+            self.kf.sigmas_f = seen[2].copy()
+            return
+        self.kf.sigmas_f = self.kf.points_fn.sigma_points(x, P)
+        self._sigmas_of = (np.array(x, dtype=float), np.array(P, dtype=float), self.kf.sigmas_f.copy())
+
     def predict(self, u: ArrayLike) -> None:
         """Unscented prediction through the motion model's mean function."""
         g, _, Q = self._process(u)
         self.kf.Q = Q
         self.kf.predict(fx=lambda x, dt: g(x))
+        # filterpy has just drawn the sigma points of its (x, P); _fix changes them only at the edges
+        self._sigmas_of = (np.array(self.kf.x, dtype=float), np.array(self.kf.P, dtype=float),
+                           np.array(self.kf.sigmas_f, dtype=float))
         self._fix()
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        self._refresh_sigmas()
 
     def update(self, z: ArrayLike, ids: ArrayLike | None = None) -> None:
         """Unscented correction with all sightings of this step stacked in one vector.
@@ -841,8 +873,8 @@ class UKFLocalizer(_GaussianLocalizer):
         def hx_flat(x):
             return range_bearing(x, lms).reshape(-1)
 
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        self._refresh_sigmas()
         R = np.kron(np.eye(len(zz)), self.R1)
         self.kf.update(zz.reshape(-1), R=R, hx=hx_flat)
         self._fix()
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        self._refresh_sigmas()
