@@ -29,7 +29,10 @@ odometry model's ``alphas = (a1..a4)`` are those of PR table 5.6.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import scipy.linalg as _scipy_linalg      # filterpy's EKF inverts S with it; the lean update does the same
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 from numpy.typing import ArrayLike, NDArray
 
@@ -473,7 +476,10 @@ class _PoseEKF(ExtendedKalmanFilter):
 def _residual_z(a, b):
     d = np.array(a, dtype=float) - b
     flat = d.reshape(-1)
-    flat[1::2] = wrap_angle(flat[1::2])
+    # wrap_angle gives bearings already in [-pi, pi) back bit for bit: only call it (its numpy
+    # overhead is most of this function's cost) when one of the few bearings lies outside
+    if not all(-math.pi <= x < math.pi for x in flat[1::2].tolist()):
+        flat[1::2] = wrap_angle(flat[1::2])
     return d
 
 
@@ -760,7 +766,35 @@ class EKFLocalizer(_GaussianLocalizer):
             H, on = range_bearing_jacobian(self.kf.x[:, 0], m)
             if on:
                 continue  # on top of the landmark: the bearing says nothing
-            self.update_model(zk, lambda x, m=m: range_bearing(x, m), H, self.R1, residual=_residual_z)
+            self._update_sighting(zk, m, H)
+
+    def _update_sighting(self, zk: NDArray, m: NDArray, H: NDArray) -> None:
+        """One range-bearing correction: ``update_model(zk, h_m, H, R1, _residual_z)``, bit for bit, leaner.
+
+        The lean path of :meth:`update`: filterpy's ``ExtendedKalmanFilter.update``
+        (Joseph form) written out with the same operations in the same order,
+        on inputs this class has checked, without the per-call generality (the
+        ``deepcopy`` of ``z``, argument juggling) that costs more than the
+        3x3 algebra itself. ``tests/test_lean_ekf.py`` holds it equal to
+        :meth:`update_model`, which calls filterpy.
+        """
+        kf, R = self.kf, self.R1
+        x, P = kf.x, kf.P
+        z = zk.reshape(-1, 1)
+        PHT = np.dot(P, H.T)
+        S = np.dot(H, PHT) + R
+        SI = _scipy_linalg.inv(S)
+        K = PHT.dot(SI)
+        hx = range_bearing(x.reshape(3), m).reshape(-1, 1)
+        y = _residual_z(z.reshape(-1), hx.reshape(-1)).reshape(-1, 1)
+        x = x + np.dot(K, y)
+        I_KH = kf._I - np.dot(K, H)
+        P = np.dot(I_KH, P).dot(I_KH.T) + np.dot(K, R).dot(K.T)
+        kf.S, kf.SI, kf.K, kf.y, kf.z = S, SI, K, y, z.copy()
+        kf._log_likelihood = kf._likelihood = kf._mahalanobis = None
+        kf.x_post, kf.P_post = x.copy(), P.copy()
+        x[2, 0] = wrap_angle(x[2, 0])
+        kf.x, kf.P = x, 0.5 * (P + P.T)
 
 
 class UKFLocalizer(_GaussianLocalizer):

@@ -138,3 +138,45 @@ def test_ukf_sigma_cache_notices_a_belief_set_from_outside():
     g.reset(g.mean, g.cov * 2.0)
     g.update([[4.5, 0.1]], [0])
     assert np.allclose(f.mean, g.mean, atol=1e-12) and np.allclose(f.cov, g.cov, atol=1e-12)
+
+
+def test_residual_z_wraps_as_wrap_angle():
+    from localize.ekf import _residual_z
+
+    rng = np.random.default_rng(7)
+    edges = [np.pi, -np.pi, np.nextafter(np.pi, 0), np.nextafter(-np.pi, 0), 0.0, -0.0, 3 * np.pi, np.nan]
+    for _ in range(300):
+        k = rng.integers(1, 6)
+        a, b = rng.normal(0, 3, 2 * k), rng.normal(0, 3, 2 * k)
+        if rng.random() < 0.3:
+            a[1::2] = rng.choice(edges, k)
+            b[1::2] = 0.0
+        d = np.array(a) - b
+        d[1::2] = wrap_angle(d[1::2])
+        assert np.array_equal(_residual_z(a, b), d, equal_nan=True)
+
+
+class _FilterpyEKF(EKFLocalizer):
+    """The EKF whose corrections go through update_model, i.e. filterpy's own update (the path before)."""
+
+    def _update_sighting(self, zk, m, H):
+        from localize.ekf import _residual_z
+        from localize.sensors import range_bearing
+
+        self.update_model(zk, lambda x: range_bearing(x, m), H, self.R1, residual=_residual_z)
+
+
+@pytest.mark.parametrize("name", ["tracking", "large_prior", "global", "kidnapping", "heading_noise"])
+def test_ekf_lean_update_equals_filterpy_update(name):
+    sc = C.scenario(name)
+    d = C.simulate(sc, np.random.default_rng(12))
+    kw = dict(dt=sc.dt, mean=d.start + [0.3, -0.2, 0.1], cov=sc.prior_cov)
+    a = EKFLocalizer(sc.landmarks, sc.sigma_range, sc.sigma_bearing, sc.alphas, **kw)
+    b = _FilterpyEKF(sc.landmarks, sc.sigma_range, sc.sigma_bearing, sc.alphas, **kw)
+    for u, z, ids in zip(d.controls, d.z, d.ids):
+        for f in (a, b):
+            f.step(u, z, ids if sc.known_ids else None)
+        assert np.array_equal(a.mean, b.mean) and np.array_equal(a.cov, b.cov)
+        if len(z):
+            for attr in ("S", "K", "y", "x_post", "P_post", "z"):
+                assert np.array_equal(getattr(a.kf, attr), getattr(b.kf, attr)), attr
