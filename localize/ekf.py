@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.linalg as _scipy_linalg      # filterpy's EKF inverts S with it; the lean update does the same
+import scipy.linalg as _scipy_linalg  # filterpy's EKF inverts S with it; the lean update does the same
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 from numpy.typing import ArrayLike, NDArray
 
@@ -505,12 +505,27 @@ def _z_mean(sigmas, Wm):
 
 
 class _VectorUKF(UnscentedKalmanFilter):
-    """filterpy's UKF with the motion model applied to all sigma points in one call."""
+    """filterpy's UKF with the motion model applied to all sigma points in one call.
+
+    ``_sigmas_of = (x, P, sigmas)`` remembers the last sigma points drawn and the
+    belief they were drawn from (see :meth:`UKFLocalizer._refresh_sigmas`).
+    """
+
+    _sigmas_of = None
+
+    def sigmas_of(self, x, P):
+        """``points_fn.sigma_points(x, P)``, from memory when ``(x, P)`` are bit for bit the last ones."""
+        seen = self._sigmas_of
+        if seen is not None and np.array_equal(seen[0], x) and np.array_equal(seen[1], P):
+            return seen[2].copy()
+        sigmas = self.points_fn.sigma_points(x, P)
+        self._sigmas_of = (np.array(x, dtype=float), np.array(P, dtype=float), sigmas.copy())
+        return sigmas
 
     def compute_process_sigmas(self, dt, fx=None, **fx_args):
         if fx is None:
             fx = self.fx
-        sigmas = self.points_fn.sigma_points(self.x, self.P)
+        sigmas = self.sigmas_of(self.x, self.P)
         self.sigmas_f = np.asarray(fx(sigmas, dt, **fx_args), dtype=float)
 
 
@@ -842,7 +857,7 @@ class UKFLocalizer(_GaussianLocalizer):
         m, c = self._check_belief(mean, cov)
         self.kf.x = m
         self.kf.P = c.copy()
-        self._sigmas_of = None
+        self.kf._sigmas_of = None
         self._refresh_sigmas()
 
     @property
@@ -870,15 +885,10 @@ class UKFLocalizer(_GaussianLocalizer):
         The sigma points are a deterministic function of ``(x, P)``: when both
         are bit for bit those they were last computed from, the stored ones
         are the ones a new computation would give (one Cholesky factorisation
-        and seven sigma points saved, the lean path of a step).
+        and seven sigma points saved, the lean path of a step; the next
+        prediction starts from the same memory).
         """
-        x, P = self.kf.x, self.kf.P
-        seen = self._sigmas_of
-        if seen is not None and np.array_equal(seen[0], x) and np.array_equal(seen[1], P):
-            self.kf.sigmas_f = seen[2].copy()
-            return
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(x, P)
-        self._sigmas_of = (np.array(x, dtype=float), np.array(P, dtype=float), self.kf.sigmas_f.copy())
+        self.kf.sigmas_f = self.kf.sigmas_of(self.kf.x, self.kf.P)
 
     def predict(self, u: ArrayLike) -> None:
         """Unscented prediction through the motion model's mean function."""
@@ -886,8 +896,8 @@ class UKFLocalizer(_GaussianLocalizer):
         self.kf.Q = Q
         self.kf.predict(fx=lambda x, dt: g(x))
         # filterpy has just drawn the sigma points of its (x, P); _fix changes them only at the edges
-        self._sigmas_of = (np.array(self.kf.x, dtype=float), np.array(self.kf.P, dtype=float),
-                           np.array(self.kf.sigmas_f, dtype=float))
+        self.kf._sigmas_of = (np.array(self.kf.x, dtype=float), np.array(self.kf.P, dtype=float),
+                              np.array(self.kf.sigmas_f, dtype=float))
         self._fix()
         self._refresh_sigmas()
 

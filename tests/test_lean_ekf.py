@@ -106,7 +106,11 @@ def test_residual_x_wraps_as_wrap_angle():
 
 
 class _AlwaysFreshUKF(UKFLocalizer):
-    """The UKF that draws its sigma points again at every occasion (the path before the cache)."""
+    """The UKF that draws its sigma points again at every occasion (the path before the memory)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.kf.sigmas_of = lambda x, P: self.kf.points_fn.sigma_points(x, P)     # no memory, in predict too
 
     def _refresh_sigmas(self):
         self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
