@@ -34,6 +34,7 @@ import math
 import numpy as np
 import scipy.linalg as _scipy_linalg  # filterpy's EKF inverts S with it; the lean update does the same
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+from filterpy.kalman import unscented_transform as _unscented_transform
 from numpy.typing import ArrayLike, NDArray
 
 from . import motion as _motion
@@ -528,6 +529,28 @@ class _VectorUKF(UnscentedKalmanFilter):
         sigmas = self.sigmas_of(self.x, self.P)
         self.sigmas_f = np.asarray(fx(sigmas, dt, **fx_args), dtype=float)
 
+    def update_all(self, z: NDArray, R: NDArray, hx_all) -> None:
+        """filterpy's ``update(z, R)``, line for line, with the measurement of all sigma points in one call.
+
+        ``hx_all(sigmas (7, 3)) -> (7, dim_z)`` gives row ``i`` equal to filterpy's
+        ``hx(sigmas[i])`` (element-wise functions: the same numbers); the
+        unscented transform, the gain and the update are filterpy's own.
+        """
+        self.sigmas_h = np.atleast_2d(hx_all(self.sigmas_f))
+        zp, self.S = _unscented_transform(self.sigmas_h, self.Wm, self.Wc, R, self.z_mean, self.residual_z)
+        self.SI = self.inv(self.S)
+        Pxz = self.cross_variance(self.x, zp, self.sigmas_f, self.sigmas_h)
+        self.K = np.dot(Pxz, self.SI)
+        self.y = self.residual_z(z, zp)
+        self.x = self.state_add(self.x, np.dot(self.K, self.y))
+        self.P = self.P - np.dot(self.K, np.dot(self.S, self.K.T))
+        self.z = np.array(z, copy=True)
+        self.x_post = self.x.copy()
+        self.P_post = self.P.copy()
+        self._log_likelihood = None
+        self._likelihood = None
+        self._mahalanobis = None
+
 
 class _GaussianLocalizer:
     """Shared set-up, checks and accessors of the EKF and the UKF."""
@@ -914,11 +937,11 @@ class UKFLocalizer(_GaussianLocalizer):
             ii = self.associate(zz)
         lms = self.landmarks[ii]
 
-        def hx_flat(x):
-            return range_bearing(x, lms).reshape(-1)
+        def hx_all(sigmas):      # row i: range_bearing(sigmas[i], lms).reshape(-1), all rows at once
+            return range_bearing(sigmas[:, None, :], lms[None]).reshape(len(sigmas), -1)
 
         self._refresh_sigmas()
         R = np.kron(np.eye(len(zz)), self.R1)
-        self.kf.update(zz.reshape(-1), R=R, hx=hx_flat)
+        self.kf.update_all(zz.reshape(-1), R, hx_all)
         self._fix()
         self._refresh_sigmas()

@@ -184,3 +184,38 @@ def test_ekf_lean_update_equals_filterpy_update(name):
         if len(z):
             for attr in ("S", "K", "y", "x_post", "P_post", "z"):
                 assert np.array_equal(getattr(a.kf, attr), getattr(b.kf, attr)), attr
+
+
+class _FilterpyUpdateUKF(UKFLocalizer):
+    """The UKF whose correction calls filterpy's own update, one hx call per sigma point (the path before)."""
+
+    def update(self, z, ids=None):
+        from localize.sensors import range_bearing
+
+        zz, ii = self._sightings(z, ids)
+        if len(zz) == 0:
+            return
+        if ii is None:
+            ii = self.associate(zz)
+        lms = self.landmarks[ii]
+        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        self.kf.update(zz.reshape(-1), R=np.kron(np.eye(len(zz)), self.R1),
+                       hx=lambda x: range_bearing(x, lms).reshape(-1))
+        self._fix()
+        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+
+
+@pytest.mark.parametrize("name", ["tracking", "large_prior", "kidnapping", "ambiguity", "heading_noise"])
+def test_ukf_update_all_equals_filterpy_update(name):
+    sc = C.scenario(name)
+    d = C.simulate(sc, np.random.default_rng(13))
+    kw = dict(dt=sc.dt, mean=d.start + [0.3, -0.2, 0.1], cov=sc.prior_cov)
+    a = UKFLocalizer(sc.landmarks, sc.sigma_range, sc.sigma_bearing, sc.alphas, **kw)
+    b = _FilterpyUpdateUKF(sc.landmarks, sc.sigma_range, sc.sigma_bearing, sc.alphas, **kw)
+    for u, z, ids in zip(d.controls, d.z, d.ids):
+        for f in (a, b):
+            f.step(u, z, ids if sc.known_ids else None)
+        assert np.array_equal(a.mean, b.mean) and np.array_equal(a.cov, b.cov)
+        if len(z):
+            for attr in ("sigmas_h", "S", "K", "y", "x_post", "P_post", "z"):
+                assert np.array_equal(getattr(a.kf, attr), getattr(b.kf, attr)), attr
