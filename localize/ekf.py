@@ -29,13 +29,17 @@ odometry model's ``alphas = (a1..a4)`` are those of PR table 5.6.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import scipy.linalg as _scipy_linalg  # filterpy's EKF inverts S with it; the lean update does the same
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+from filterpy.kalman import unscented_transform as _unscented_transform
 from numpy.typing import ArrayLike, NDArray
 
 from . import motion as _motion
 from ._checks import check_alphas, check_positive
-from .geometry import as_poses, wrap_angle
+from .geometry import _wrap_scalar, as_poses, wrap_angle
 from .sensors import ON_LANDMARK, LandmarkModel, range_bearing, range_bearing_jacobian
 
 __all__ = [
@@ -153,7 +157,11 @@ def velocity_jacobians(pose: ArrayLike, u: ArrayLike, dt: float) -> tuple[NDArra
     """
     x, y, th = _pose(pose)
     v, w = _control(u, 2)
-    dt = check_positive(dt, "dt", "seconds")
+    return _velocity_jacobians(th, v, w, check_positive(dt, "dt", "seconds"))
+
+
+def _velocity_jacobians(th: float, v: float, w: float, dt: float) -> tuple[NDArray, NDArray]:
+    """:func:`velocity_jacobians` after its checks (heading ``th``, control ``(v, w)``, ``dt > 0``)."""
     half = 0.5 * w * dt
     s, ds = float(_sinc(np.asarray(half))), float(_dsinc(half))
     c, sn = np.cos(th + half), np.sin(th + half)
@@ -199,10 +207,16 @@ def velocity_noise(u: ArrayLike, dt: float, alphas: ArrayLike) -> NDArray[np.flo
 
 
 def _velocity_process_cov(pose: NDArray, u: NDArray, dt: float, alphas: NDArray) -> tuple[NDArray, NDArray]:
-    G, V = velocity_jacobians(pose, u, dt)
-    M = velocity_noise(u, dt, alphas)
+    """``G`` and ``V M V^T`` (plus the final rotation's variance) for a checked pose, control, ``dt`` and alphas.
+
+    The lean path of the filters' prediction: :func:`velocity_jacobians` and
+    :func:`velocity_noise` without their per-call checks (the filter checked
+    ``alphas`` and ``dt`` once, when it was made, and checks ``u`` at each step).
+    """
+    G, V = _velocity_jacobians(pose[2], u[0], u[1], dt)
+    var_v, var_w, var_gamma = _motion._velocity_variances(u[0], u[1], alphas, "squared")
+    M = np.diag([float(var_v), float(var_w)])
     Q = V @ M @ V.T
-    _, _, var_gamma = _motion.velocity_variances(u[0], u[1], alphas)
     Q[2, 2] += float(var_gamma) * dt**2
     return G, Q
 
@@ -463,14 +477,17 @@ class _PoseEKF(ExtendedKalmanFilter):
 def _residual_z(a, b):
     d = np.array(a, dtype=float) - b
     flat = d.reshape(-1)
-    flat[1::2] = wrap_angle(flat[1::2])
+    # wrap_angle gives bearings already in [-pi, pi) back bit for bit: only call it (its numpy
+    # overhead is most of this function's cost) when one of the few bearings lies outside
+    if not all(-math.pi <= x < math.pi for x in flat[1::2].tolist()):
+        flat[1::2] = wrap_angle(flat[1::2])
     return d
 
 
 def _residual_x(a, b):
     d = np.array(a, dtype=float) - b
     flat = d.reshape(-1)
-    flat[2] = wrap_angle(flat[2])
+    flat[2] = _wrap_scalar(float(flat[2]), True)     # wrap_angle of one number, without its numpy overhead
     return d
 
 
@@ -489,13 +506,50 @@ def _z_mean(sigmas, Wm):
 
 
 class _VectorUKF(UnscentedKalmanFilter):
-    """filterpy's UKF with the motion model applied to all sigma points in one call."""
+    """filterpy's UKF with the motion model applied to all sigma points in one call.
+
+    ``_sigmas_of = (x, P, sigmas)`` remembers the last sigma points drawn and the
+    belief they were drawn from (see :meth:`UKFLocalizer._refresh_sigmas`).
+    """
+
+    _sigmas_of = None
+
+    def sigmas_of(self, x, P):
+        """``points_fn.sigma_points(x, P)``, from memory when ``(x, P)`` are bit for bit the last ones."""
+        seen = self._sigmas_of
+        if seen is not None and np.array_equal(seen[0], x) and np.array_equal(seen[1], P):
+            return seen[2].copy()
+        sigmas = self.points_fn.sigma_points(x, P)
+        self._sigmas_of = (np.array(x, dtype=float), np.array(P, dtype=float), sigmas.copy())
+        return sigmas
 
     def compute_process_sigmas(self, dt, fx=None, **fx_args):
         if fx is None:
             fx = self.fx
-        sigmas = self.points_fn.sigma_points(self.x, self.P)
+        sigmas = self.sigmas_of(self.x, self.P)
         self.sigmas_f = np.asarray(fx(sigmas, dt, **fx_args), dtype=float)
+
+    def update_all(self, z: NDArray, R: NDArray, hx_all) -> None:
+        """filterpy's ``update(z, R)``, line for line, with the measurement of all sigma points in one call.
+
+        ``hx_all(sigmas (7, 3)) -> (7, dim_z)`` gives row ``i`` equal to filterpy's
+        ``hx(sigmas[i])`` (element-wise functions: the same numbers); the
+        unscented transform, the gain and the update are filterpy's own.
+        """
+        self.sigmas_h = np.atleast_2d(hx_all(self.sigmas_f))
+        zp, self.S = _unscented_transform(self.sigmas_h, self.Wm, self.Wc, R, self.z_mean, self.residual_z)
+        self.SI = self.inv(self.S)
+        Pxz = self.cross_variance(self.x, zp, self.sigmas_f, self.sigmas_h)
+        self.K = np.dot(Pxz, self.SI)
+        self.y = self.residual_z(z, zp)
+        self.x = self.state_add(self.x, np.dot(self.K, self.y))
+        self.P = self.P - np.dot(self.K, np.dot(self.S, self.K.T))
+        self.z = np.array(z, copy=True)
+        self.x_post = self.x.copy()
+        self.P_post = self.P.copy()
+        self._log_likelihood = None
+        self._likelihood = None
+        self._mahalanobis = None
 
 
 class _GaussianLocalizer:
@@ -530,7 +584,9 @@ class _GaussianLocalizer:
         if self.motion == "velocity":
             uu = _control(u, 2)
             G, Q = _velocity_process_cov(mean, uu, self.dt, self.alphas)
-            return (lambda x: velocity_motion(x, uu, self.dt)), G, Q
+            v, w, dt = uu[0], uu[1], self.dt
+            # velocity_motion with only the check that matters per call (finite poses): u and dt are checked
+            return (lambda x: _motion._move_velocity(as_poses(x), v, w, dt)), G, Q
         uu = odometry_controls(u)
         G, V = odometry_jacobians(mean, uu)
         Q = V @ odometry_noise(uu, self.alphas) @ V.T
@@ -748,7 +804,35 @@ class EKFLocalizer(_GaussianLocalizer):
             H, on = range_bearing_jacobian(self.kf.x[:, 0], m)
             if on:
                 continue  # on top of the landmark: the bearing says nothing
-            self.update_model(zk, lambda x, m=m: range_bearing(x, m), H, self.R1, residual=_residual_z)
+            self._update_sighting(zk, m, H)
+
+    def _update_sighting(self, zk: NDArray, m: NDArray, H: NDArray) -> None:
+        """One range-bearing correction: ``update_model(zk, h_m, H, R1, _residual_z)``, bit for bit, leaner.
+
+        The lean path of :meth:`update`: filterpy's ``ExtendedKalmanFilter.update``
+        (Joseph form) written out with the same operations in the same order,
+        on inputs this class has checked, without the per-call generality (the
+        ``deepcopy`` of ``z``, argument juggling) that costs more than the
+        3x3 algebra itself. ``tests/test_lean_ekf.py`` holds it equal to
+        :meth:`update_model`, which calls filterpy.
+        """
+        kf, R = self.kf, self.R1
+        x, P = kf.x, kf.P
+        z = zk.reshape(-1, 1)
+        PHT = np.dot(P, H.T)
+        S = np.dot(H, PHT) + R
+        SI = _scipy_linalg.inv(S)
+        K = PHT.dot(SI)
+        hx = range_bearing(x.reshape(3), m).reshape(-1, 1)
+        y = _residual_z(z.reshape(-1), hx.reshape(-1)).reshape(-1, 1)
+        x = x + np.dot(K, y)
+        I_KH = kf._I - np.dot(K, H)
+        P = np.dot(I_KH, P).dot(I_KH.T) + np.dot(K, R).dot(K.T)
+        kf.S, kf.SI, kf.K, kf.y, kf.z = S, SI, K, y, z.copy()
+        kf._log_likelihood = kf._likelihood = kf._mahalanobis = None
+        kf.x_post, kf.P_post = x.copy(), P.copy()
+        x[2, 0] = wrap_angle(x[2, 0])
+        kf.x, kf.P = x, 0.5 * (P + P.T)
 
 
 class UKFLocalizer(_GaussianLocalizer):
@@ -796,7 +880,8 @@ class UKFLocalizer(_GaussianLocalizer):
         m, c = self._check_belief(mean, cov)
         self.kf.x = m
         self.kf.P = c.copy()
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        self.kf._sigmas_of = None
+        self._refresh_sigmas()
 
     @property
     def mean(self) -> NDArray[np.float64]:
@@ -817,13 +902,27 @@ class UKFLocalizer(_GaussianLocalizer):
             P = (v * np.maximum(w, _MIN_EIGENVALUE)) @ v.T
         self.kf.P = P
 
+    def _refresh_sigmas(self) -> None:
+        """``kf.sigmas_f = sigma_points(kf.x, kf.P)``, computed again only if ``x`` or ``P`` changed.
+
+        The sigma points are a deterministic function of ``(x, P)``: when both
+        are bit for bit those they were last computed from, the stored ones
+        are the ones a new computation would give (one Cholesky factorisation
+        and seven sigma points saved, the lean path of a step; the next
+        prediction starts from the same memory).
+        """
+        self.kf.sigmas_f = self.kf.sigmas_of(self.kf.x, self.kf.P)
+
     def predict(self, u: ArrayLike) -> None:
         """Unscented prediction through the motion model's mean function."""
         g, _, Q = self._process(u)
         self.kf.Q = Q
         self.kf.predict(fx=lambda x, dt: g(x))
+        # filterpy has just drawn the sigma points of its (x, P); _fix changes them only at the edges
+        self.kf._sigmas_of = (np.array(self.kf.x, dtype=float), np.array(self.kf.P, dtype=float),
+                              np.array(self.kf.sigmas_f, dtype=float))
         self._fix()
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        self._refresh_sigmas()
 
     def update(self, z: ArrayLike, ids: ArrayLike | None = None) -> None:
         """Unscented correction with all sightings of this step stacked in one vector.
@@ -838,11 +937,11 @@ class UKFLocalizer(_GaussianLocalizer):
             ii = self.associate(zz)
         lms = self.landmarks[ii]
 
-        def hx_flat(x):
-            return range_bearing(x, lms).reshape(-1)
+        def hx_all(sigmas):      # row i: range_bearing(sigmas[i], lms).reshape(-1), all rows at once
+            return range_bearing(sigmas[:, None, :], lms[None]).reshape(len(sigmas), -1)
 
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        self._refresh_sigmas()
         R = np.kron(np.eye(len(zz)), self.R1)
-        self.kf.update(zz.reshape(-1), R=R, hx=hx_flat)
+        self.kf.update_all(zz.reshape(-1), R, hx_all)
         self._fix()
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        self._refresh_sigmas()

@@ -229,7 +229,11 @@ def velocity_variances(v: ArrayLike, omega: ArrayLike, alphas: ArrayLike,
     >>> [round(float(x), 6) for x in velocity_variances(1.0, 0.5, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])]
     [0.15, 0.4, 0.65]
     """
-    a = check_alphas(alphas, 6)
+    return _velocity_variances(v, omega, check_alphas(alphas, 6), noise)
+
+
+def _velocity_variances(v: ArrayLike, omega: ArrayLike, a: NDArray, noise: NoiseSpec) -> tuple[NDArray, NDArray, NDArray]:
+    """:func:`velocity_variances` with ``a`` already checked (the lean path)."""
     v = np.asarray(v, dtype=float)
     w = np.asarray(omega, dtype=float)
     if callable(noise):
@@ -345,6 +349,11 @@ def move_velocity(poses: ArrayLike, v: ArrayLike, omega: ArrayLike, dt: float,
     """
     p = as_poses(poses)
     dt = check_positive(dt, "dt", "seconds")
+    return _move_velocity(p, v, omega, dt, gamma)
+
+
+def _move_velocity(p: NDArray, v: ArrayLike, omega: ArrayLike, dt: float, gamma: ArrayLike = 0.0) -> NDArray:
+    """:func:`move_velocity` without its checks: ``p`` a float pose array, ``dt > 0`` (the lean path)."""
     v, w, g = (np.asarray(a, dtype=float) for a in (v, omega, gamma))
     half = 0.5 * w * dt
     chord = v * dt * np.sinc(half / math.pi)     # np.sinc(x) = sin(pi x)/(pi x)
@@ -773,7 +782,7 @@ def _velocity_setup(u, dt, alphas, noise, min_std):
     dt = check_positive(dt, "dt", "seconds")
     alphas = check_alphas(alphas, 6)
     min_std = check_nonnegative(min_std, "min_std")
-    sv, sw, sg = _stds(velocity_variances(v, w, alphas, noise), min_std, ("v", "omega", "gamma"))
+    sv, sw, sg = _stds(_velocity_variances(v, w, alphas, noise), min_std, ("v", "omega", "gamma"))
     return v, w, dt, (sv, sw, sg)
 
 
@@ -815,7 +824,14 @@ def sample_velocity(poses: ArrayLike, u: ArrayLike, dt: float, alphas: ArrayLike
     p = as_poses(poses)
     rng = check_rng(rng)
     sgn = _check_sign(sign)
-    v, w, dt, (sv, sw, sg) = _velocity_setup(u, dt, alphas, noise, min_std)
+    v, w, dt, stds = _velocity_setup(u, dt, alphas, noise, min_std)
+    return _sample_velocity(p, v, w, dt, stds, rng, sgn)
+
+
+def _sample_velocity(p: NDArray, v: NDArray, w: NDArray, dt: float, stds: list, rng: np.random.Generator,
+                     sgn: float) -> NDArray[np.float64]:
+    """:func:`sample_velocity` after its checks (``p`` poses, ``stds`` from :func:`_stds`): the shared arithmetic."""
+    sv, sw, sg = stds
     ctrl_shape = np.broadcast_shapes(v.shape, w.shape, sv.shape, sw.shape, sg.shape)
     shape = _broadcast_leading("poses", p.shape[:-1], "u", ctrl_shape)
     m = math.prod(shape)
@@ -833,7 +849,7 @@ def sample_velocity(poses: ArrayLike, u: ArrayLike, dt: float, alphas: ArrayLike
         v_hat = eps[:, 0] * bsv + bv
         w_hat = eps[:, 1] * bsw + bw
         g_hat = eps[:, 2] * bsg
-        out[i:j] = move_velocity(flat_p[i:j], v_hat, w_hat, dt, g_hat)
+        out[i:j] = _move_velocity(flat_p[i:j], v_hat, w_hat, dt, g_hat)
     return out.reshape(shape + (3,))
 
 
@@ -1057,9 +1073,22 @@ class VelocityMotion:
         self.alphas = check_alphas(alphas, 6)
         self.dt = check_positive(dt, "dt", "seconds")
         self.options = options
+        # the options are checked once, here, and each call takes the lean path (the same numbers as
+        # sample_velocity, which checks everything at every call); an unknown option is left to it
+        self._lean = set(options) <= {"noise", "sign", "min_std"}
+        if self._lean:
+            self._noise = options.get("noise", "squared")
+            self._sign = _check_sign(options.get("sign", 1))
+            self._min_std = check_nonnegative(options.get("min_std", 0.0), "min_std")
 
     def __call__(self, poses: NDArray[np.float64], u, rng: np.random.Generator) -> NDArray[np.float64]:
-        return sample_velocity(poses, u, self.dt, self.alphas, rng, **self.options)
+        if not self._lean:
+            return sample_velocity(poses, u, self.dt, self.alphas, rng, **self.options)
+        p = as_poses(poses)
+        rng = check_rng(rng)
+        v, w = _velocity_control(u)
+        stds = _stds(_velocity_variances(v, w, self.alphas, self._noise), self._min_std, ("v", "omega", "gamma"))
+        return _sample_velocity(p, v, w, self.dt, stds, rng, self._sign)
 
     def __repr__(self) -> str:
         return f"VelocityMotion(alphas={tuple(round(float(a), 6) for a in self.alphas)}, dt={self.dt:g})"

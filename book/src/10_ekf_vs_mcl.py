@@ -54,15 +54,26 @@ print("localize", localize.__version__)
 
 # %% [markdown]
 # The measurements at the heart of this chapter, 20 seeds of six scenarios
-# with all three filters, take several seconds of computing on every CPU. We
-# start them now, in worker processes that run in the background (one per
-# CPU), and collect the results when the section "Six scenarios" needs them;
-# meanwhile we look at how the filters work. (`C.start_monte_carlo` returns at
-# once; `C.monte_carlo` is the same for one scenario, waiting for the end.)
+# with all three filters, take several seconds of computing. We set them up
+# now with `C.start_monte_carlo`, which returns at once; a run is computed
+# when its result is first asked for, and the section "Six scenarios" asks for
+# them all. The single runs drawn before that are runs of this experiment
+# too, with the beliefs of a few steps kept for the figures (`snapshots`):
+# `experiment.run(name, seed)` is the same as `C.run_filters(C.scenario(name),
+# seed)`, without computing it twice. (With `processes=None` the runs would
+# go on in the background in worker processes, one per CPU, while we read on:
+# quicker by the clock on a computer of your own. On the shared 2-core
+# machine this book is built on, the workers would only add their own start
+# (each imports the package anew) to the computing, so here the runs stay in
+# the notebook's own process, `processes=1`. `C.monte_carlo` is the same for
+# one scenario, waiting for the end.)
 
 # %%
 N_SEEDS = 20
-experiment = C.start_monte_carlo([C.scenario(name) for name in C.SCENARIOS], range(N_SEEDS))
+FIGURE_RUNS = {("tracking", 1): (0, 10, 29), ("global", 3): (0, 3, 29), ("kidnapping", 2): (14, 16, 24, 39),
+               ("ambiguity", 3): (0, 3, 12), ("heading_noise", 4): (4, 5, 11)}    # (scenario, seed): steps drawn
+experiment = C.start_monte_carlo([C.scenario(name) for name in C.SCENARIOS], range(N_SEEDS), snapshots=FIGURE_RUNS,
+                                 processes=1)
 
 # %% [markdown]
 # ## The setting: landmarks, a range-bearing sensor, the velocity model
@@ -194,7 +205,7 @@ print("same covariance:", bool(np.allclose(ekf.cov, Sigma, atol=1e-10)))
 # circle), not the whole landmark field.
 
 # %%
-run = C.run_filters(C.scenario("tracking"), 1, snapshot_steps=(0, 10, 29))
+run = experiment.run("tracking", 1)              # = C.run_filters(C.scenario("tracking"), 1), with snapshots
 fig = plot_beliefs(run, (0, 10, 29), zoom=0.6)
 plt.show()
 for name in C.FILTERS:
@@ -309,7 +320,7 @@ print(f"95% band of the {N_SEEDS}-seed average NEES: [{lo:.2f}, {hi:.2f}]")
 # enter its running averages).
 
 # %% tags=["nbval-ignore-output", "remove-output"]
-mcs = experiment.result(progress=True)  # waits for the runs still going (started at the top)
+mcs = experiment.result(progress=True)  # computes the runs not computed yet (set up at the top)
 
 # %% tags=["nbval-ignore-output"]
 rows = C.summary_rows(mcs.values())
@@ -432,7 +443,7 @@ plt.show()
 # MCL spreads its particles over the whole area and keeps every place that fits.
 
 # %%
-run = C.run_filters(C.scenario("global"), 3, snapshot_steps=(0, 3, 29))
+run = experiment.run("global", 3)
 fig = plot_beliefs(run, (0, 3, 29))
 plt.show()
 plot_errors(mcs["global"])
@@ -451,7 +462,7 @@ plt.show()
 # twenty (the red band below; checked above).
 
 # %%
-run = C.run_filters(C.scenario("kidnapping"), 2, snapshot_steps=(14, 16, 24, 39))
+run = experiment.run("kidnapping", 2)
 fig = plot_beliefs(run, (14, 16, 24, 39))
 plt.show()
 plot_errors(mcs["kidnapping"])
@@ -471,7 +482,7 @@ plt.show()
 # cloud is wider than its errors — too cautious, which is the safe side.
 
 # %%
-run = C.run_filters(C.scenario("ambiguity"), 3, snapshot_steps=(0, 3, 12))
+run = experiment.run("ambiguity", 3)
 fig = plot_beliefs(run, (0, 3, 12), pad=3.0)
 plt.show()
 print("MCL clusters at step 0:", localize.mcl.estimate_pose(run.snapshots[0]["MCL"]).n_clusters)
@@ -503,7 +514,7 @@ print("MCL clusters at step 0:", localize.mcl.estimate_pose(run.snapshots[0]["MC
 # they are — the NEES.
 
 # %%
-run = C.run_filters(C.scenario("heading_noise"), 4, snapshot_steps=(4, 5, 11))
+run = experiment.run("heading_noise", 4)
 fig = plot_beliefs(run, (4, 5, 11))
 plt.show()
 plot_nees(mcs["heading_noise"])
@@ -605,13 +616,14 @@ for name, situation, use in verdicts:
 #
 # This notebook keeps its experiment small: 20 seeds of 30–40 steps and 1000
 # particles, just enough for the claims checked above (each with a tolerance
-# derived from the 20 seeds), and under 10 s on one core. Twenty seeds are not
+# derived from the 20 seeds), and seconds of computing on one core. Twenty seeds are not
 # enough for finer distinctions: for publication-grade numbers raise `N_SEEDS`
 # to 500, pass `n_steps=200` and `n_particles=5000` through
 # `C.scenario(name, ...)`, and expect the run to take a few hundred times
-# longer. The seeds are independent runs, so `start_monte_carlo` (as above) and
-# `monte_carlo(..., processes=None)` share them among one worker process per
-# CPU; the table is the same for any number of processes.
+# longer. The seeds are independent runs, so `start_monte_carlo(...,
+# processes=None)` (in the background) and `monte_carlo(..., processes=None)`
+# share them among one worker process per CPU; the table is the same for any
+# number of processes.
 #
 # ## Summary
 #
@@ -748,9 +760,9 @@ print(f"gated EKF lost after the kidnapping in {lost} of 10 seeds")
 # Solution (click to show)
 configs = {(n, infl): C.scenario("global", n_particles=n, mcl_inflation=infl, n_steps=20)
            for n in (100, 300, 1000) for infl in (1.0, 2.0)}
-pending = C.start_monte_carlo(configs, range(10), filters=("MCL",))  # in the background, on every CPU
-mc = C.monte_carlo(C.scenario("global", known_ids=True), range(10), filters=("EKF",))  # meanwhile, here
-rates = {key: m.metrics["MCL"].failure_rate for key, m in pending.result().items()}
+mcl_runs = C.start_monte_carlo(configs, range(10), filters=("MCL",), processes=1)  # processes=None: every CPU
+rates = {key: m.metrics["MCL"].failure_rate for key, m in mcl_runs.result().items()}
+mc = C.monte_carlo(C.scenario("global", known_ids=True), range(10), filters=("EKF",))
 for n in (100, 300, 1000):
     print(f"{n:5d} particles: MCL fails {100 * rates[n, 1.0]:.0f}% (exact model), "
           f"{100 * rates[n, 2.0]:.0f}% (inflated x2)")
