@@ -86,8 +86,9 @@ def wrap_angle(angle: ArrayLike, exact: bool = True) -> NDArray[np.float64] | fl
         # Only values on or beyond an end need a second look (rare): fold what
         # rounding left outside, and give back inputs that were already inside
         # (the shift by pi and back rounds those within one ulp of +pi to -pi).
-        edge = np.flatnonzero((w <= -np.pi) | (w >= np.pi))
-        if edge.size:
+        out = (w <= -np.pi) | (w >= np.pi)
+        if out.any():
+            edge = np.flatnonzero(out)
             flat, src = w.reshape(-1), a.reshape(-1)
             e, s = flat[edge], src[edge]
             e[e >= np.pi] -= TWO_PI
