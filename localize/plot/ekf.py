@@ -181,7 +181,7 @@ def plot_beliefs(run, steps, axes=None, pad: float = 2.0, n_std: float = 2.0, ma
     axes[1, 0].set_ylabel("MCL particles")
     axes[0, 0].legend(loc="lower left", fontsize=7)
     fig.suptitle(run.scenario.title, fontsize=10)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.05, top=0.9, wspace=0.3, hspace=0.2)   # fixed: no tight_layout
     return fig
 
 
