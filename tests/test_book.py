@@ -70,6 +70,12 @@ def test_notebook_and_script_in_sync(nb_path):
         )
 
 
+def _unversioned(text: str) -> str:
+    """``text`` without the version number in its header's ``jupytext_version:`` line (any other difference in
+    what jupytext writes, the header included, still counts)."""
+    return re.sub(r"^(#\s+jupytext_version:).*$", r"\1", text, count=1, flags=re.M)
+
+
 @pytest.mark.parametrize("nb_path", NOTEBOOKS, ids=lambda p: p.name)
 def test_script_is_what_jupytext_writes_from_the_notebook(nb_path):
     # JupyterLab's jupytext refuses to open a notebook that is newer than its twin and differs
@@ -77,7 +83,8 @@ def test_script_is_what_jupytext_writes_from_the_notebook(nb_path):
     # than"); a clone sets the files' times in any order, so the twin must be jupytext's own text
     py = _twin(nb_path)
     want = jupytext.writes(jupytext.read(nb_path), fmt="py:percent")
-    assert py.read_text() == want, (
+    # the header names the jupytext release that wrote it: a newer one installed is not a difference in the text
+    assert _unversioned(py.read_text()) == _unversioned(want), (
         f"{py.name} is not what jupytext writes from {nb_path.name}; "
         f"rebuild with: python tools/build_notebooks.py {py.relative_to(ROOT)}")
 
