@@ -247,7 +247,6 @@ class _Sample:
     offset: NDArray
     fit_d: float
     min_beams: int
-    short_unjudged: bool
     f_wrong: NDArray
 
     def right_fits(self, error: float, rng: np.random.Generator) -> NDArray:
@@ -258,12 +257,12 @@ class _Sample:
         right[:, :2] += rng.normal(0.0, error, (n, 2))
         right[:, 2] = wrap_angle(right[:, 2] + rng.normal(0.0, error / max(self.typical, error), n))
         f = scan_fits(self.caster, right, self.offset, self.scans, self.valid, self.angles, self.fit_d,
-                      self.min_beams, self.short_unjudged)
+                      self.min_beams)
         return f[np.isfinite(f)]
 
 
 def _sample(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.random.Generator, n_poses: int,
-            fit_distance: float | None, radius: float, min_beams: int, short_unjudged: bool) -> _Sample:
+            fit_distance: float | None, radius: float, min_beams: int) -> _Sample:
     n = check_count(n_poses, "n_poses")
     a = np.asarray(angles, dtype=float)
     max_range = float(sensor.max_range)
@@ -279,15 +278,15 @@ def _sample(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.random.
     phi = rng.uniform(-np.pi, np.pi, n)
     near = truth + np.column_stack([r * np.cos(phi), r * np.sin(phi), rng.uniform(-0.5, 0.5, n)])
     alike = look_alikes(grid, sensor, truth, np.where(valid, scans, np.inf), a, rng, radius)
-    f_wrong = np.concatenate([scan_fits(caster, near, offset, scans, valid, a, fit_d, min_beams, short_unjudged),
-                              scan_fits(caster, alike, offset, scans, valid, a, fit_d, min_beams, short_unjudged)])
-    return _Sample(truth, scans, valid, a, typical, caster, offset, fit_d, int(min_beams), bool(short_unjudged),
+    f_wrong = np.concatenate([scan_fits(caster, near, offset, scans, valid, a, fit_d, min_beams),
+                              scan_fits(caster, alike, offset, scans, valid, a, fit_d, min_beams)])
+    return _Sample(truth, scans, valid, a, typical, caster, offset, fit_d, int(min_beams),
                    f_wrong[np.isfinite(f_wrong)])
 
 
 def calibration_fits(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.random.Generator, *,
                      n_poses: int = 300, fit_distance: float | None = None, radius: float = 1.0,
-                     min_beams: int = 5, short_unjudged: bool = False,
+                     min_beams: int = 5,
                      error: float | None = None) -> tuple[NDArray, NDArray]:
     """The scan fits of :func:`calibrate`: ``(fits at right poses, fits at wrong poses)``, NaN dropped.
 
@@ -306,7 +305,7 @@ def calibration_fits(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: n
       look-alike).
     """
     rng = check_rng(rng)
-    s = _sample(grid, sensor, angles, rng, n_poses, fit_distance, radius, min_beams, short_unjudged)
+    s = _sample(grid, sensor, angles, rng, n_poses, fit_distance, radius, min_beams)
     e = converged_error(sensor, s.angles.size) if error is None else check_positive(error, "error", "metres")
     return s.right_fits(e, rng), s.f_wrong
 
@@ -331,7 +330,7 @@ def error_levels(sensor: Any, n_beams: int, radius: float) -> tuple[float, ...]:
 
 def calibrate(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.random.Generator, *,
               n_poses: int = 300, n_bins: int = 10, right_radius: float = 1.0, map_error: float = MAP_ERROR,
-              fit_distance: float | None = None, min_beams: int = 5, short_unjudged: bool = False) -> EvidenceModel:
+              fit_distance: float | None = None, min_beams: int = 5) -> EvidenceModel:
     """The :class:`EvidenceModel` of this map and sensor, from simulated scans (see :func:`calibration_fits`).
 
     ``p(fit | right)`` is the mean of its calibrations at the errors of :func:`error_levels`: how far a
@@ -345,7 +344,7 @@ def calibrate(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.rando
     """
     check_positive(right_radius, "right_radius", "metres")
     rng = check_rng(rng)
-    s = _sample(grid, sensor, angles, rng, n_poses, fit_distance, right_radius, min_beams, short_unjudged)
+    s = _sample(grid, sensor, angles, rng, n_poses, fit_distance, right_radius, min_beams)
     levels = error_levels(sensor, s.angles.size, right_radius)
     f_rights = [s.right_fits(e, rng) for e in levels]
     if min(f.size for f in f_rights) < 10 or s.f_wrong.size < 10:
@@ -374,18 +373,13 @@ class LocalizedBelief:
         found the robot); the evidence then has to say so.
     prior : float
         ``p_localized`` before the first scan (a global localization starts knowing nothing).
-    weight : float
-        Exponent on each scan's likelihood: consecutive scans of one place see the same walls, so they are
-        not independent evidence (as the beams of one scan are not: the sensor model's ``temper``).
     """
 
-    def __init__(self, model: EvidenceModel, p_lose: float = 0.01, p_find: float = 0.05, prior: float = 0.0,
-                 weight: float = 1.0) -> None:
+    def __init__(self, model: EvidenceModel, p_lose: float = 0.01, p_find: float = 0.05, prior: float = 0.0) -> None:
         for name, v in (("p_lose", p_lose), ("p_find", p_find), ("prior", prior)):
             if not 0.0 <= float(v) <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1]; got {v!r}")
         self.model = model
-        self.weight = float(weight)
         self.transition = np.array([[1.0 - p_find, p_find], [p_lose, 1.0 - p_lose]])   # rows: from wrong, right
         self.belief = np.array([1.0 - prior, prior])
 
@@ -399,8 +393,8 @@ class LocalizedBelief:
         self.belief = self.belief @ self.transition
 
     def correct(self, fit: float) -> None:
-        """Bayes' rule with the scan's fit (NaN: no evidence), the likelihood raised to ``weight``."""
-        self.belief = discrete.update(self.belief, self.model.likelihood(fit) ** self.weight)
+        """Bayes' rule with the scan's fit (NaN: no evidence)."""
+        self.belief = discrete.update(self.belief, self.model.likelihood(fit))
 
     def step(self, fit: float) -> float:
         """Predict one scan ahead, then correct with the scan's fit (NaN: no correction); returns ``p``."""
@@ -486,8 +480,7 @@ class ReliabilityState:
 
     def __init__(self, grid: OccupancyGrid, sensor: Any, *, right_radius: float = 1.0, p_change: float = 0.01,
                  localized_at: float = 0.9, lost_below: float = 0.5, probe_shift: float = 1.0, seed: int = 0,
-                 model: EvidenceModel | None = None, fit_distance: float | None = None,
-                 evidence_weight: float = 1.0) -> None:
+                 model: EvidenceModel | None = None, fit_distance: float | None = None) -> None:
         if not 0.0 <= lost_below <= localized_at <= 1.0:
             raise ValueError(f"need 0 <= lost_below <= localized_at <= 1; got {lost_below!r}, {localized_at!r}")
         self.grid, self.sensor = grid, sensor
@@ -495,7 +488,6 @@ class ReliabilityState:
         self.localized_at, self.lost_below = float(localized_at), float(lost_below)
         self.probe_shift, self.seed, self.model = float(probe_shift), int(seed), model
         self.fit_distance = fit_distance
-        self.evidence_weight = float(evidence_weight)
         self.belief: LocalizedBelief | None = None if model is None else self._fresh(model)
         self.last_pose: NDArray | None = None
         self.last_p: float | None = None
@@ -506,8 +498,7 @@ class ReliabilityState:
         self.fit_d = 2.0 * float(getattr(sensor, "sigma_hit", 0.2)) if fit_distance is None else float(fit_distance)
 
     def _fresh(self, model: EvidenceModel) -> LocalizedBelief:
-        return LocalizedBelief(model, p_lose=self.p_change, p_find=0.0, prior=0.5,
-                               weight=self.evidence_weight)
+        return LocalizedBelief(model, p_lose=self.p_change, p_find=0.0, prior=0.5)
 
     def _calibrate(self, angles: NDArray) -> None:
         self.model = calibrate(self.grid, self.sensor, angles, np.random.default_rng(self.seed),
