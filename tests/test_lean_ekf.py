@@ -177,12 +177,18 @@ def test_ekf_lean_update_equals_filterpy_update(name):
     kw = dict(dt=sc.dt, mean=d.start + [0.3, -0.2, 0.1], cov=sc.prior_cov)
     a = EKFLocalizer(sc.landmarks, sc.sigma_range, sc.sigma_bearing, sc.alphas, **kw)
     b = _FilterpyEKF(sc.landmarks, sc.sigma_range, sc.sigma_bearing, sc.alphas, **kw)
+    _in_lockstep(a, b, sc, d, ("S", "K", "y", "x_post", "P_post", "z"))
+
+
+def _in_lockstep(a, b, sc, d, attrs):
+    """Step filters ``a`` and ``b`` through the simulated run ``d``: after every step their beliefs, and after
+    every correction the filterpy attributes ``attrs``, are equal bit for bit."""
     for u, z, ids in zip(d.controls, d.z, d.ids):
         for f in (a, b):
             f.step(u, z, ids if sc.known_ids else None)
         assert np.array_equal(a.mean, b.mean) and np.array_equal(a.cov, b.cov)
         if len(z):
-            for attr in ("S", "K", "y", "x_post", "P_post", "z"):
+            for attr in attrs:
                 assert np.array_equal(getattr(a.kf, attr), getattr(b.kf, attr)), attr
 
 
@@ -212,10 +218,4 @@ def test_ukf_update_all_equals_filterpy_update(name):
     kw = dict(dt=sc.dt, mean=d.start + [0.3, -0.2, 0.1], cov=sc.prior_cov)
     a = UKFLocalizer(sc.landmarks, sc.sigma_range, sc.sigma_bearing, sc.alphas, **kw)
     b = _FilterpyUpdateUKF(sc.landmarks, sc.sigma_range, sc.sigma_bearing, sc.alphas, **kw)
-    for u, z, ids in zip(d.controls, d.z, d.ids):
-        for f in (a, b):
-            f.step(u, z, ids if sc.known_ids else None)
-        assert np.array_equal(a.mean, b.mean) and np.array_equal(a.cov, b.cov)
-        if len(z):
-            for attr in ("sigmas_h", "S", "K", "y", "x_post", "P_post", "z"):
-                assert np.array_equal(getattr(a.kf, attr), getattr(b.kf, attr)), attr
+    _in_lockstep(a, b, sc, d, ("sigmas_h", "S", "K", "y", "x_post", "P_post", "z"))
