@@ -621,8 +621,8 @@ class Restart:
     restarts too (updates the map cannot judge leave that count as it is).
     """
 
-    def __init__(self, after: int, n_fresh: int) -> None:
-        self.after, self.n_fresh = int(after), int(n_fresh)
+    def __init__(self, after: int, n_fresh: int, lost_below: float = 0.5) -> None:
+        self.after, self.n_fresh, self.lost_below = int(after), int(n_fresh), float(lost_below)
         self.poor = self.lost_run = self.unjudged = 0
 
     def count(self, step: Step, ctx: Context, evidence: MapEvidence, gathered: bool) -> None:
@@ -647,12 +647,12 @@ class Restart:
 
     def count_p(self, step: Step, ctx: Context, gathered: bool) -> None:
         """Count with ``p_localized`` (:class:`localize.reliability.ReliabilityState`): an update at which the
-        place the cloud agreed or gathered on is more likely wrong than right (``p_localized`` below a half)
-        counts against it, one more likely right resets the count; a lost filter counts whether its cloud
-        agrees or not (outside a probation)."""
+        place the cloud agreed or gathered on is in doubt (``p_localized`` below ``lost_below``, the state's
+        threshold for *lost*) counts against it, one above resets the count; a lost filter counts whether its
+        cloud agrees or not (outside a probation)."""
         if not step.updated:
             return
-        wrong = step.p_localized < 0.5
+        wrong = step.p_localized < self.lost_below
         self.poor = self.poor + 1 if (wrong and (step.agreed or gathered)) else 0
         self.lost_run = self.lost_run + 1 if (ctx.state == "lost" and wrong and ctx.probation is None) else 0
         self.unjudged = 0

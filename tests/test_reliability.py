@@ -214,12 +214,14 @@ def test_the_state_follows_p_localized_and_a_jump_starts_a_new_hypothesis():
         ps.append(st.p_localized)
     assert ctx.state == "lost" and st.p_localized < 0.5 and np.all(np.diff(ps) < 0)   # every poor fit lowers it
     assert any("localized -> lost" in t for _, t in ctx.events)
-    # a spread cloud: at most its mass near the estimate, whatever the scan says
+    # a spread cloud: the geometric mean of the belief and the cloud's mass near the estimate, whatever the scan
+    # says (never more than the root of that mass; the product of the two would be the mass times the belief)
     spread = (g.sample_free(100, rng), np.full(100, -np.log(100)))
     st = _Step(16, truth, spread, fit_scan=_scan_at(truth, lf, rng))
     state.update(st, ctx)
     mass = np.mean(np.hypot(*(spread[0][:, :2] - truth[:2]).T) <= 1.0)
-    assert st.p_localized <= mass + 1e-12
+    assert st.p_localized == pytest.approx(np.sqrt(state.belief.p * mass), rel=1e-12)
+    assert st.p_localized <= np.sqrt(mass) + 1e-12
     assert state.jumped(_Step(12, truth + [2.0, 0, 0], tight))            # 2 m with no odometry: a new place
     assert not state.jumped(_Step(12, truth + [0.3, 0, 0], tight))
 

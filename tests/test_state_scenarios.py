@@ -14,8 +14,8 @@ and ``trace.p_localized`` only where a trace has one. The rules, after the issue
 * **"lost" is never said of an estimate within 0.3 m** where the fault is
   one that a right estimate survives (a moved obstacle, a person in front
   of the laser, an understated maximum range).
-* with ``p_localized``: at most 0.5 wherever the estimate is more than 1 m off
-  (outside the excused scans), on average at least 0.8 where it is within
+* with ``p_localized``: below the state's *lost* threshold wherever the estimate is more
+  than 1 m off (outside the excused scans), on average at least 0.8 where it is within
   0.3 m (see :func:`check_probability`), and never rising while the laser is dead.
 
 Each test runs two seeds (two filters on the same simulated log; about a
@@ -33,6 +33,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import scenarios as S
+
+from localize.reliability import LOST_BELOW
 
 FAR = 1.0
 NEAR = 0.3
@@ -122,8 +124,12 @@ def check_not_lost_when_near(state, err) -> None:
 def check_probability(trace, err, excuse=None, exclude=None) -> None:
     """With ``trace.p_localized``: low where the estimate is more than FAR off, high where it is within NEAR.
 
-    * at most 0.5 at every scan more than FAR off (outside ``excuse``): above 0.5 it
-      claims that the estimate is more likely right than wrong;
+    * below :data:`~localize.reliability.LOST_BELOW` (0.7) at every scan more than FAR
+      off (outside ``excuse``): at that probability a localized filter would stay
+      localized. (The probability is the geometric mean of two estimates; this is the
+      bound of 0.5 the test held their product to before, 0.7 ** 2 = 0.49. A calibrated
+      probability can say 0.55 of a wrong estimate: of the scans at which it says so,
+      about 45% are wrong.)
     * on average at least 0.8 over the scans within NEAR after the first localized
       scan (outside ``exclude``): every one of them is right, so a calibrated
       probability there is near 1; the issue allows a reliability bin to be off by
@@ -137,9 +143,9 @@ def check_probability(trace, err, excuse=None, exclude=None) -> None:
     far = err > FAR
     if excuse is not None:
         far &= ~excuse
-    assert not np.any(p[far] > 0.5), (f"p_localized above 0.5 while more than {FAR} m off at scans "
-                                      + ", ".join(f"{k} ({err[k]:.2f} m, p {p[k]:.2f})"
-                                                  for k in np.flatnonzero(far & (p > 0.5))[:12]))
+    high = far & (p >= LOST_BELOW)
+    assert not np.any(high), (f"p_localized at or above {LOST_BELOW} while more than {FAR} m off at scans "
+                              + ", ".join(f"{k} ({err[k]:.2f} m, p {p[k]:.2f})" for k in np.flatnonzero(high)[:12]))
     state = np.asarray(trace.state).astype(str)
     if np.any(state == "localized"):
         near = judged_near(state, err, exclude)
@@ -226,7 +232,7 @@ def test_kidnapping_is_noticed_within_three_scans():
                                              f"{err[90:90 + KIDNAP_NOTICED].round(1).tolist()} m off"
 
 
-@pytest.mark.xfail(strict=True, reason="issue 43, open: never 'localized', but p_localized reaches 0.63 (seed 0, "
+@pytest.mark.xfail(strict=True, reason="issue 43, open: never 'localized', but p_localized reaches 0.79 (seed 0, "
                    "23 m off): the probe compares the estimate with the poses 1 m ahead and behind it, and near the "
                    "point where a corridor end comes into the laser's range those differ")
 def test_featureless_corridor_is_never_localized():
@@ -254,7 +260,7 @@ def test_missing_odometry_in_a_turn_is_not_called_localized():
         assert state[-1] == "localized" and err[-1] < NEAR, f"seed {seed}: ends {state[-1]} {err[-1]:.2f} m off"
 
 
-@pytest.mark.xfail(strict=True, reason="issue 43, open: p_localized dips below 0.5 at scans 23-27 (both seeds) "
+@pytest.mark.xfail(strict=True, reason="issue 43, open: p_localized dips below 0.7 (lost) at scans 23-27 (both seeds) "
                    "while the estimate is 0.10-0.28 m off, a few scans after it first localized, and the state says "
                    "lost there; the stated 2.5 m range leaves few beams, whose fits are noisy")
 def test_understated_max_range_does_not_make_a_right_estimate_lost():
@@ -306,8 +312,10 @@ def test_the_checks_catch_a_dishonest_state():
 
     honest = np.where(err > FAR, 0.05, 0.95)
     check_probability(fake(honest), err, ex, ex)
-    with pytest.raises(AssertionError, match="above 0.5 while more than"):
+    with pytest.raises(AssertionError, match="at or above 0.7 while more than"):
         check_probability(fake(np.full(err.size, 0.9)), err, ex, ex)
+    with pytest.raises(AssertionError, match="at or above 0.7 while more than"):
+        check_probability(fake(np.where(err > FAR, LOST_BELOW, 0.95)), err, ex, ex)
     with pytest.raises(AssertionError, match="averages"):
         check_probability(fake(np.where(err > FAR, 0.05, 0.6)), err, ex, ex)
 

@@ -509,16 +509,17 @@ plt.show()
 # |---|---|---|---|
 # | `ReliabilityState` | how probable is it that the estimate is within a metre of the robot? | `p_localized`, and from it *searching*, *localized* or *lost* | `p.assess`, `p.conclude` |
 # | `Redraw` | did every particle get zero likelihood, or leave the map? is the filter lost? | re-draws every particle; while lost, injects a share at each resampling | `p.intervene`, `p.injection` |
-# | `Restart` + `Probation` | has `p_localized` stayed below a half for several updates? | adds a fresh uniform cloud beside the old one; the scans pick the winner | `p.intervene` |
+# | `Restart` + `Probation` | has `p_localized` stayed below the *lost* threshold for several updates? | adds a fresh uniform cloud beside the old one; the scans pick the winner | `p.intervene` |
 # | `Expansion` | does the scan not fit the agreed place? | spreads the cloud a little wider (Ueda et al. 2004) | `p.assess` |
 #
 # `localize.runloop.run_filter` assembles them from plain arguments. The same
 # kidnapping as above, with plain MCL (no injection at all) but the filter
-# allowed to restart after three updates whose place is more likely wrong than
-# right, and to inject 20 % while lost:
+# allowed to restart after three updates at which the state would call it
+# lost, and to inject 20 % while lost:
 
 # %%
 from localize.runloop import run_filter  # noqa: E402
+from localize.reliability import LOCALIZED_AT, LOST_BELOW  # noqa: E402  (0.95 and 0.7: see below)
 
 
 def kidnap_with_policies(seed=0, n_steps=50, n=5000):
@@ -549,7 +550,7 @@ ax_e.axhline(1.0, color="grey", lw=0.8, ls=":")
 ax_e.set_ylabel("position error (m)")
 ax_e.axvline(KIDNAP, color="C3", lw=0.8)
 ax_p.plot(tr_p.p_localized, color="C2")
-for level, name in ((0.9, "localized at"), (0.5, "lost below")):
+for level, name in ((LOCALIZED_AT, "localized at"), (LOST_BELOW, "lost below")):
     ax_p.axhline(level, color="grey", lw=0.8, ls="--")
     ax_p.text(len(e_p) - 1, level + 0.02, f"{name} {level}", ha="right", fontsize=8, color="grey")
 ax_p.axvline(KIDNAP, color="C3", lw=0.8)
@@ -638,9 +639,14 @@ assert trace[2] > 0.99 and 3 <= below <= 5
 # backwards, left and right, summed over the scans since the place was
 # chosen — a five-hypothesis histogram filter of chapter 2. In a featureless
 # corridor the scans never tell the estimate from the poses ahead and behind,
-# and the probe stays near a third. `p_localized` is the belief times the
-# smaller of the two; the state is *localized* once it reaches 0.9 and *lost*
-# when a localized filter's falls below 0.5.
+# and the probe stays near a third.
+#
+# The belief and the smaller of the two masses are two estimates of the same
+# probability, each from other evidence. Multiplied, they would count the
+# doubt twice: two estimates of 0.7 give 0.49. `p_localized` is their
+# **geometric mean**, $\sqrt{b\,m}$, which counts it once; the state is
+# *localized* once it reaches 0.95 and *lost* when a localized filter's falls
+# below 0.7.
 #
 # **Is it calibrated?** A probability is honest when, of all the steps at
 # which it says 0.8, about 80 % are right. Take the four kidnapped robots
@@ -660,8 +666,8 @@ ps, rights = np.concatenate(ps), np.concatenate(rights)
 rows = reliability_table(ps, rights, n_bins=5, min_count=1)
 for lo, hi, n_bin, mean_p, share in rows:
     print(f"p_localized {lo:.1f}-{hi:.1f}: {n_bin:3d} steps, mean p {mean_p:.2f}, right {share:.2f}")
-sure = ps >= 0.9
-print(f"steps with p_localized >= 0.9: {sure.sum()}, of them more than 1 m off: {np.sum(~rights[sure])}")
+sure = ps >= LOCALIZED_AT
+print(f"steps with p_localized >= {LOCALIZED_AT}: {sure.sum()}, of them more than 1 m off: {np.sum(~rights[sure])}")
 off_0 = np.flatnonzero((runs[0][1].state == "localized") & (position_error(runs[0][1].poses, runs[0][0].poses) > 1))
 off_1 = np.flatnonzero((runs[1][1].state == "localized") & (position_error(runs[1][1].poses, runs[1][0].poses) > 1))
 assert off_0.size >= 8 and off_0[0] == KIDNAP                      # robot 0: slow to notice (text below)
