@@ -188,6 +188,39 @@ def test_restart_counts_poor_fits_of_an_agreed_cloud_and_starts_a_probation():
     assert restart.poor == 0
 
 
+def test_restart_with_p_localized_counts_the_updates_below_its_lost_threshold():
+    """With the probability state, an update counts against the place when p_localized is below the state's
+    threshold for lost (Restart.lost_below, set from ReliabilityState's), and one at or above it resets the count;
+    an update-free step leaves the count as it is."""
+    g = office()
+    f = MCL.gaussian(POSE, (1e-3, 1e-3, 1e-3), 100, (0.0,) * 4, Flat(), rng=np.random.default_rng(1), grid=g)
+    for lost_below, counted in ((0.5, [False, False, True]), (0.7, [True, False, True])):
+        restart, ctx = Restart(after=2, n_fresh=300, lost_below=lost_below), Context(StateRules())
+        for p, counts in zip((0.6, 0.7, 0.49), counted):
+            step = _scan_step(0)
+            step.agreed, step.p_localized = True, p
+            before = restart.poor
+            restart.count(step, ctx, MapEvidence(g, Flat(), StateRules()), gathered=False)
+            assert restart.poor == (before + 1 if counts else 0), (lost_below, p)
+        idle = _scan_step(0)
+        idle.z, idle.p_localized, before = None, 0.1, restart.poor
+        restart.count(idle, ctx, MapEvidence(g, Flat(), StateRules()), gathered=False)
+        assert restart.poor == before
+    restart.poor = 2
+    assert restart.due(f, ctx)
+
+
+def test_default_policies_give_the_restart_the_probability_states_lost_threshold():
+    from localize.reliability import LOST_BELOW
+    from localize.runloop import default_policies
+    from localize.sensors import LikelihoodField
+
+    g = office()
+    f = MCL.uniform(g, 200, (0.01,) * 4, LikelihoodField(g, 8.0, sigma_hit=0.2), rng=np.random.default_rng(0))
+    assert default_policies(f, restart_after=3, state="probability").restart.lost_below == LOST_BELOW
+    assert default_policies(f, restart_after=3).restart.lost_below == 0.5      # the threshold state: a half
+
+
 def test_probation_shows_the_old_place_until_the_new_one_wins_weight_and_fit():
     f = MCL.gaussian(POSE, (1e-3, 1e-3, 1e-3), 50, (0.0,) * 4, Flat(), rng=np.random.default_rng(2))
     far = POSE + [5.0, 0.0, 0.0]
