@@ -96,6 +96,7 @@ from .pipeline import (  # noqa: F401
     read_log_file,
     resolve_particles,
 )
+from .reliability import LOCALIZED_AT, LOST_BELOW  # the probability state's thresholds, for summary.json
 from .settings import RunSettings
 
 __all__ = ["main", "build_parser", "Progress", "run_kwargs", "write_trajectory", "summarize", "write_summary",
@@ -249,8 +250,8 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
 #: What summary.json says the state means when it comes from ``p_localized``.
 STATE_MEANING = ("p_localized: the probability that the estimate is within 1 m of the robot, from the scans' fit to "
                  "the map there (calibrated at start-up on this map and sensor model) and the particles' own mass "
-                 "near it (localize.reliability.ReliabilityState); localized: p_localized reached 0.95; lost: it was "
-                 "localized and p_localized fell below 0.7; searching: never localized yet")
+                 f"near it (localize.reliability.ReliabilityState); localized: p_localized reached {LOCALIZED_AT}; "
+                 f"lost: it was localized and p_localized fell below {LOST_BELOW}; searching: never localized yet")
 
 
 def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, settings: dict,

@@ -271,3 +271,17 @@ def test_map_error_bounds_the_evidence_against_a_right_estimate():
     np.testing.assert_allclose(plain.p_right, plain.p_right_at.mean(axis=0))
     centres = 0.5 * (plain.edges[:-1] + plain.edges[1:])
     assert np.all(np.diff(plain.p_right_at @ centres) < 0)
+
+
+def test_the_command_line_states_the_thresholds_the_state_uses():
+    """``localize run --help`` and summary.json name the probability state's thresholds: the ones it uses."""
+    import dataclasses
+
+    from localize import cli, settings
+    from localize.reliability import LOCALIZED_AT, LOST_BELOW, ReliabilityState
+
+    text = " ".join({f.name: f for f in dataclasses.fields(settings.RunSettings)}["state"].metadata["cli_help"].split())
+    assert f"localized at {LOCALIZED_AT}, lost below {LOST_BELOW}; restarts when it stays below {LOST_BELOW}" in text
+    assert f"reached {LOCALIZED_AT};" in cli.STATE_MEANING and f"fell below {LOST_BELOW};" in cli.STATE_MEANING
+    state = ReliabilityState(office(), LikelihoodField(office(), 8.0, sigma_hit=0.2))
+    assert (state.localized_at, state.lost_below) == (LOCALIZED_AT, LOST_BELOW)
