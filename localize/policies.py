@@ -43,6 +43,7 @@ from .evidence import expected_fit, free_share, pinned, scan_fit, unexplained_be
 from .geometry import mean_pose
 from .geometry import relative as _relative
 from .grid import OccupancyGrid
+from .reliability import LOST_BELOW
 
 __all__ = [
     "StateRules",
@@ -621,7 +622,7 @@ class Restart:
     restarts too (updates the map cannot judge leave that count as it is).
     """
 
-    def __init__(self, after: int, n_fresh: int, lost_below: float = 0.5) -> None:
+    def __init__(self, after: int, n_fresh: int, lost_below: float = LOST_BELOW) -> None:
         self.after, self.n_fresh, self.lost_below = int(after), int(n_fresh), float(lost_below)
         self.poor = self.lost_run = self.unjudged = 0
 

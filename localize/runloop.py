@@ -475,8 +475,6 @@ def default_policies(mcl: Any, *, grid: OccupancyGrid | None = None, min_motion:
                          "and log_likelihood: the probability is calibrated on them; use state='thresholds'")
     if state == "probability":
         p.state = ReliabilityState(grid, sensor, fit_distance=rules.fit_distance)
-        if p.restart is not None:
-            p.restart.lost_below = p.state.lost_below      # restarts count the updates the state calls doubtful
     else:
         p.state = ThresholdState(sensor, rules, p.evidence)
     return p

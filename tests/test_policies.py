@@ -190,7 +190,7 @@ def test_restart_counts_poor_fits_of_an_agreed_cloud_and_starts_a_probation():
 
 def test_restart_with_p_localized_counts_the_updates_below_its_lost_threshold():
     """With the probability state, an update counts against the place when p_localized is below the state's
-    threshold for lost (Restart.lost_below, set from ReliabilityState's), and one at or above it resets the count;
+    threshold for lost (Restart.lost_below, by default ReliabilityState's), and one at or above it resets the count;
     an update-free step leaves the count as it is."""
     g = office()
     f = MCL.gaussian(POSE, (1e-3, 1e-3, 1e-3), 100, (0.0,) * 4, Flat(), rng=np.random.default_rng(1), grid=g)
@@ -217,8 +217,11 @@ def test_default_policies_give_the_restart_the_probability_states_lost_threshold
 
     g = office()
     f = MCL.uniform(g, 200, (0.01,) * 4, LikelihoodField(g, 8.0, sigma_hit=0.2), rng=np.random.default_rng(0))
-    assert default_policies(f, restart_after=3, state="probability").restart.lost_below == LOST_BELOW
-    assert default_policies(f, restart_after=3).restart.lost_below == 0.5      # the threshold state: a half
+    pol = default_policies(f, restart_after=3, state="probability")
+    assert pol.restart.lost_below == LOST_BELOW == pol.state.lost_below
+    # one threshold for every restart: with the threshold state no step has a p_localized to compare with it,
+    # and the restart counts the fits (test above)
+    assert default_policies(f, restart_after=3).restart.lost_below == LOST_BELOW
 
 
 def test_probation_shows_the_old_place_until_the_new_one_wins_weight_and_fit():
