@@ -552,7 +552,7 @@ ax_e.axvline(KIDNAP, color="C3", lw=0.8)
 ax_p.plot(tr_p.p_localized, color="C2")
 for level, name in ((LOCALIZED_AT, "localized at"), (LOST_BELOW, "lost below")):
     ax_p.axhline(level, color="grey", lw=0.8, ls="--")
-    ax_p.text(len(e_p) - 1, level + 0.02, f"{name} {level}", ha="right", fontsize=8, color="grey")
+    ax_p.text(len(e_p) - 1, level - 0.02, f"{name} {level}", ha="right", va="top", fontsize=8, color="grey")
 ax_p.axvline(KIDNAP, color="C3", lw=0.8)
 ax_p.set_ylim(-0.02, 1.05)
 ax_p.set_ylabel("p_localized")
