@@ -249,8 +249,9 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
 
 #: What summary.json says the state means when it comes from ``p_localized``.
 STATE_MEANING = ("p_localized: the probability that the estimate is within 1 m of the robot, from the scans' fit to "
-                 "the map there (calibrated at start-up on this map and sensor model) and the particles' own mass "
-                 f"near it (localize.reliability.ReliabilityState); localized: p_localized reached {LOCALIZED_AT}; "
+                 "the map there (calibrated at start-up on this map and sensor model), the particles' own mass "
+                 "near it, and its share against the look-alike places kept as rivals "
+                 f"(localize.reliability.ReliabilityState); localized: p_localized reached {LOCALIZED_AT}; "
                  f"lost: it was localized and p_localized fell below {LOST_BELOW}; searching: never localized yet")
 
 

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .estimate import Estimate
+from .geometry import compose
 from .grid import OccupancyGrid
 from .motion import odometry_pair
 from .policies import (
@@ -280,6 +281,12 @@ class Policies:
     def intervene(self, step: Step, mcl: Any) -> bool:
         """A restart, a redraw or a probation's own resampling instead of the plain one; True if one happened."""
         ctx = self.ctx
+        g = self.state.take_switch(ctx.probation is None) if isinstance(self.state, ReliabilityState) else None
+        if g is not None:
+            mcl.replace(compose(g[None], mcl.particles), mcl.log_weights)
+            odds = float(np.exp(self.state.rivals.switch_log_odds))
+            ctx.events.append((step.k, f"a rival place fits the scans {odds:.0f} times better than the estimate or more:"
+                                       f" the cloud moves there (x' = G x, G = {np.round(g, 2).tolist()})"))
         if self.restart is not None and self.restart.due(mcl, ctx):
             self.restart.start(step, mcl, ctx, self.rules.restart_fit * self.evidence.fit_expected)
             if self.state is not None:

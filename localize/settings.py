@@ -334,7 +334,8 @@ class RunSettings:
         choices=("thresholds", "probability"), cli_help="""
         'probability': the state comes from p_localized, the probability that the estimate is within 1 m of
         the robot (a Bayes filter over the scans' fit to the map, calibrated at start-up on this map and
-        sensor model; localized at 0.95, lost below 0.7; restarts when it stays below 0.7), written to
+        sensor model, weighed against look-alike places that the filter keeps as rivals and moves to when one
+        fits 19 times better; localized at 0.95, lost below 0.7; restarts when it stays below 0.7), written to
         trajectory.csv and summary.json; 'thresholds': the fixed rules of localize.policies.StateRules
         (default {default}; see localize.reliability for what the probability does better and worse).
         Example: --state probability""")

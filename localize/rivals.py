@@ -1,0 +1,260 @@
+"""Is there another place where the scans fit as well? The estimate against the rivals it has not forgotten.
+
+The fit of a scan at the estimate (:mod:`localize.reliability`) cannot tell a
+look-alike: a room whose mirror image is another room, a corridor whose every
+stretch looks the same, a place that fits well enough while the robot's place
+fits better. Once the particle filter has settled on one of them, resampling
+has removed the others: the cloud no longer knows they exist.
+
+:class:`RivalBank` keeps them. A rival is the estimate's own trajectory moved
+rigidly: a transform ``G`` of the map such that the robot would be at
+``G ∘ x_t`` if the estimate ``x_t`` is in the wrong place (a room's mirror
+image is the half turn about its centre). The scans the filter uses are scored
+at the estimate and at every rival with the filter's sensor model, and each
+rival keeps the log-odds it has gathered against the estimate since it was
+found,
+
+.. math:: L_i \\leftarrow L_i + \\ell_t(G_i \\circ x_t) - \\ell_t(x_t),
+
+the histogram filter of chapter 2 over a handful of hypotheses, with the
+log-likelihoods ``l`` of chapter 6. The estimate's share of the posterior,
+``1 / (1 + sum_i exp(L_i))`` (even prior odds), is a third estimate of
+"am I localized?": a rival that fits as well holds it at a half. Rivals are
+found every ``every`` scans by a search over the whole map for the places where
+the newest scan fits best (:func:`localize.placesearch.best_places`), ranked
+again on the last ``window`` scans; a new rival starts with the log-odds of
+every scan since the place was chosen (up to ``history``), taken along the
+estimate's trajectory, so that a place that fits the last few scans does not
+outweigh one that has fitted many. Every rival is hill-climbed on the window
+when the search runs (the map is never exactly symmetric), and at every scan
+the estimate and each rival are scored at their best of a few small moves
+(:data:`TRACK_MOVES`), alike.
+
+When a rival's odds reach those the state calls *localized*
+(``LOCALIZED_AT``, 19 to 1 against the estimate) over at least a window of
+scans, the filter was on the wrong place:
+:meth:`localize.reliability.ReliabilityState.take_switch` moves the cloud there
+by ``G`` (through :meth:`RivalBank.switch`, which keeps the
+old place as a rival, with the odds it lost by), so that the decision can be
+reversed by later scans. A restart that lands on the same look-alike again
+would not.
+
+This is multi-hypothesis tracking in the spirit of Jensfelt and Kristensen's
+(*Active global localization for a mobile robot using multiple hypothesis
+tracking*, IEEE T-RA 2001), with the correlative search of scan matchers
+(Olson, *Real-time correlative scan matching*, ICRA 2009) to find the
+hypotheses, applied to the question of Akai's reliability estimation
+(*Reliable Monte Carlo localization for mobile robots*, 2023).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._checks import check_count, check_positive
+from .geometry import compose, inverse, relative
+from .grid import OccupancyGrid
+from .placesearch import best_places, coarse_model, stencil
+from .resample import logsumexp
+
+__all__ = ["RivalBank"]
+
+
+#: The small moves each hypothesis may take at every scan (itself, and 10 cm / 0.03 rad then half that, along each
+#: axis), the estimate and the rivals alike: a rival follows where its scans fit (the map is never exactly
+#: symmetric), and the estimate gets the same benefit, so neither is favoured by it.
+TRACK_MOVES = np.vstack([np.zeros(3), stencil(0.1, 0.03, 2)])
+
+
+#: Places the search finds per rival kept: the newest scan alone ranks many look-alikes alike (every corner of
+#: a room fits a scan of a corner); the window of scans ranks them again, and the best are kept.
+SEARCHED = 4
+
+
+def _scores(sensor: Any, poses: NDArray, z: tuple) -> NDArray[np.float64]:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ll = np.asarray(sensor.log_likelihood(poses, *z), dtype=float)
+    return np.where(np.isfinite(ll), ll, -np.inf)
+
+
+class RivalBank:
+    """The estimate against the other places the robot could be, each the estimate's trajectory moved rigidly.
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+        The map.
+    sensor : range sensor model
+        The filter's (``log_likelihood(poses, ranges, angles)``).
+    radius : float
+        Metres: a rival is at least this far from the estimate (what "right" means).
+    n_rivals : int
+        Rivals kept (the best by their odds).
+    every : int
+        Search for new rivals every so many scans the filter used.
+    window : int
+        Scans the search ranks its places on and climbs every rival on; no switch before the bank has seen this many.
+    history : int
+        Scans kept since the place was chosen: a new rival's odds are summed over them (memory, not a threshold).
+    switch_odds : float
+        A rival this much more probable than the estimate takes its place (:meth:`switch`).
+    seed : int
+        Seed of the search's own generator (the filter's random stream is not touched).
+
+    Examples
+    --------
+    A hall with pillars placed with half-turn symmetry: a scan fits the robot's pose and its mirror image alike.
+
+    >>> from localize.maps import symmetric_room
+    >>> from localize.sensors import LikelihoodField
+    >>> from localize.raycast import RayCaster
+    >>> grid = symmetric_room(tell=False)
+    >>> lf = LikelihoodField(grid, 8.0, sigma_hit=0.1)
+    >>> bank = RivalBank(grid, lf, seed=0)
+    >>> angles = np.linspace(-np.pi, np.pi, 60, endpoint=False)
+    >>> x = np.array([2.0, 4.5, 0.3])
+    >>> z = (RayCaster(grid, 8.0).cast(x[None], angles)[0], angles)
+    >>> share = bank.observe(x, z)
+    >>> mirror = bank.places(x)[np.argmax(bank.L)]
+    >>> bool(np.hypot(*(mirror[:2] - [10.0, 1.5])) < 0.2), 0.3 < share < 0.7    # the half turn about (6, 3)
+    (True, True)
+    """
+
+    def __init__(self, grid: OccupancyGrid, sensor: Any, *, radius: float = 1.0, n_rivals: int = 4, every: int = 5,
+                 window: int = 10, history: int = 200, switch_odds: float = 19.0, seed: int = 0) -> None:
+        self.grid, self.sensor = grid, sensor
+        self.radius = check_positive(radius, "radius", "metres")
+        self.n_rivals, self.every, self.window, self.history = (
+            check_count(v, n) for v, n in ((n_rivals, "n_rivals"), (every, "every"), (window, "window"),
+                                           (history, "history")))
+        self.switch_log_odds = float(np.log(check_positive(switch_odds, "switch_odds", "odds")))
+        self.rng = np.random.default_rng(seed)
+        self.coarse = coarse_model(grid, sensor)
+        self.scans: deque = deque(maxlen=self.history)     # (estimate, z) of the scans used since the place
+        self.G = np.empty((0, 3))                          # each rival: robot at G ∘ estimate
+        self.L = np.empty(0)                               # each rival's log-odds against the estimate
+        self.used = 0
+
+    @property
+    def share(self) -> float:
+        """The estimate's posterior among itself and the rivals (1 with none)."""
+        return float(np.exp(-logsumexp(np.concatenate([[0.0], self.L]))))
+
+    def places(self, pose: NDArray) -> NDArray[np.float64]:
+        """Where each rival puts the robot when the estimate is ``pose``: ``(R, 3)``."""
+        return compose(self.G, np.asarray(pose, dtype=float)[None])
+
+    def observe(self, pose: ArrayLike, z: tuple) -> float:
+        """Score the scan ``z`` the filter used at ``pose`` (the estimate) and at each rival; search when due.
+
+        Returns the estimate's :attr:`share`.
+        """
+        pose = np.asarray(pose, dtype=float)
+        self.scans.append((pose, z))
+        if len(self.G):
+            hyps = np.vstack([pose[None], self.places(pose)])
+            cand = compose(hyps[:, None, :], TRACK_MOVES[None, :, :])             # (1 + R, M, 3)
+            ll = _scores(self.sensor, cand.reshape(-1, 3), z).reshape(len(hyps), len(TRACK_MOVES))
+            best = np.argmax(ll, axis=1)
+            ll = ll[np.arange(len(hyps)), best]
+            if np.isfinite(ll[0]):
+                self.L = self.L + (ll[1:] - ll[0])
+                self._keep(np.isfinite(self.L))             # a rival that left the map, or ran into a wall
+        self.used += 1
+        if self.used % self.every == 0 or self.used <= 1:
+            self.search(pose)
+        return self.share
+
+    def _keep(self, mask: NDArray[np.bool_]) -> None:
+        self.G, self.L = self.G[mask], self.L[mask]
+
+    def _window_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None) -> NDArray[np.float64]:
+        """Log-likelihood of the window's scans (or ``scans``) for hypotheses ``(H, 3)`` (poses now) moved along
+        ``shape`` (one pose per scan, in the frame of the estimate now)."""
+        scans = list(self.scans)[-self.window:] if scans is None else scans
+        ll = np.zeros(len(hyps))
+        for j, (_, z) in enumerate(scans):
+            ll += _scores(self.sensor, compose(hyps, shape[j][None]), z)
+        return ll
+
+    def _climb(self, hyps: NDArray, shape: NDArray, iterations: int = 8) -> tuple[NDArray, NDArray]:
+        """Hill-climb each hypothesis on the window's log-likelihood."""
+        moves = np.vstack([np.zeros(3), stencil(0.25, 0.05, 4)])
+        ll = self._window_ll(hyps, shape)
+        for _ in range(iterations):
+            cand = compose(hyps[:, None, :], moves[None, :, :]).reshape(-1, 3)
+            c_ll = self._window_ll(cand, shape).reshape(len(hyps), len(moves))
+            k = np.argmax(c_ll, axis=1)
+            if np.all(k == 0):
+                break
+            hyps = cand.reshape(len(hyps), len(moves), 3)[np.arange(len(hyps)), k]
+            ll = c_ll[np.arange(len(hyps)), k]
+        return hyps, ll
+
+    def search(self, pose: NDArray) -> None:
+        """Hill-climb the rivals on the window, add the best new places for the newest scan, keep the best."""
+        z_now = self.scans[-1][1]
+        every = np.array([p for p, _ in self.scans])
+        shape = relative(pose, every[-self.window:])                          # the window in the current frame
+        found, _ = best_places(self.grid, self.sensor, z_now, self.rng, coarse=self.coarse,
+                               n_best=SEARCHED * self.n_rivals, away_from=pose, radius=self.radius)
+        old = self.places(pose)
+        if len(old):
+            far = np.min(np.hypot(*(found[:, None, :2] - old[None, :, :2]).transpose(2, 0, 1)), axis=1) >= self.radius
+            found = found[far]
+        if len(found) > self.n_rivals:       # the places that fit the newest scan best, ranked on the window
+            found = found[np.argsort(-self._window_ll(found, shape))[:self.n_rivals]]
+        if len(old) + len(found) == 0:
+            return
+        hyps, ll = self._climb(np.vstack([pose[None], old, found]), shape)   # the estimate climbed alike
+        est_ll, hyps, ll = ll[0], hyps[1:], ll[1:]
+        if not np.isfinite(est_ll):
+            return
+        n_old = len(old)
+        if len(self.scans) > self.window:      # a new rival is weighed on every scan since the place was chosen
+            older = list(self.scans)[:-self.window]
+            o_shape = relative(pose, every[:-self.window])
+            o_ll = self._window_ll(np.vstack([pose[None], hyps[n_old:]]), o_shape, older)
+            est_ll, ll = est_ll + o_ll[0], np.concatenate([ll[:n_old], ll[n_old:] + o_ll[1:]])
+        L = np.concatenate([self.L, ll[n_old:] - est_ll])
+        ok = np.isfinite(L) & (np.hypot(*(hyps[:, :2] - pose[:2]).T) >= self.radius)
+        G = compose(hyps, inverse(pose)[None])
+        order = [i for i in np.argsort(-L) if ok[i]]
+        kept: list[int] = []
+        for i in order:                                  # distinct places, the best first
+            if len(kept) == self.n_rivals:
+                break
+            if kept and np.min(np.hypot(*(hyps[kept, :2] - hyps[i, :2]).T)) < self.radius:
+                continue
+            kept.append(int(i))
+        self.G, self.L = G[kept], L[kept]
+
+    def winner(self) -> int | None:
+        """The rival that should take the estimate's place (odds of ``switch_odds`` or more, over at least a
+        window of scans: a place the search found for one scan fits that scan better than the estimate almost
+        always), or None."""
+        if len(self.L) == 0 or len(self.scans) < self.window:
+            return None
+        i = int(np.argmax(self.L))
+        return i if self.L[i] >= self.switch_log_odds else None
+
+    def switch(self, i: int) -> NDArray[np.float64]:
+        """Make rival ``i`` the estimate: returns its transform ``G`` (move the cloud by it); the old estimate
+        becomes a rival with the odds it lost by, and the others keep theirs, against the new estimate."""
+        g, li = self.G[i].copy(), float(self.L[i])
+        g_inv = inverse(g)
+        others = np.arange(len(self.G)) != i
+        self.G = np.vstack([compose(self.G[others], g_inv[None]), g_inv[None]])
+        self.L = np.concatenate([self.L[others] - li, [-li]])
+        self.scans = deque(((compose(g, p), z) for p, z in self.scans), maxlen=self.history)
+        return g
+
+    def clear(self) -> None:
+        """Forget the rivals and the window (the estimate moved to a place the bank did not choose)."""
+        self.scans.clear()
+        self.G, self.L = np.empty((0, 3)), np.empty(0)
+        self.used = 0

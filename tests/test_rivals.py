@@ -1,0 +1,132 @@
+"""The rival bank (localize.rivals): the estimate against the places it could be mistaken for."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from localize import sim
+from localize.geometry import compose
+from localize.maps import symmetric_room
+from localize.raycast import RayCaster
+from localize.rivals import RivalBank
+from localize.sensors import LikelihoodField
+
+ANGLES = np.linspace(-np.pi, np.pi, 60, endpoint=False)
+CENTRE_TURN = np.array([12.0, 6.0, np.pi])       # the half turn about the hall's centre (6, 3)
+
+
+def _z(grid, pose):
+    return RayCaster(grid, 8.0).cast(np.asarray(pose, dtype=float)[None], ANGLES)[0], ANGLES
+
+
+def _lf(grid):
+    return LikelihoodField(grid, 8.0, sigma_hit=0.1, temper=0.3)
+
+
+def test_the_mirror_image_holds_the_share_near_a_half_and_a_tell_takes_it():
+    """Symmetric hall: over ten scans along a path, the half turn stays a rival and the share stays in
+    (0.2, 0.8). With the tell (a box in one corner that the path sees), the same scans settle it: share > 0.95."""
+    path = np.array([[1.0 + 0.4 * k, 1.0 + 0.1 * k, 0.0] for k in range(10)])      # passes the corner box? no:
+    for tell, lo, hi in ((False, 0.2, 0.8), (True, 0.95, 1.0)):
+        grid = symmetric_room(tell=tell)
+        truth_path = compose(CENTRE_TURN[None], path) if tell else path      # in the tell room: near the box
+        bank = RivalBank(grid, _lf(grid), every=5, seed=1)
+        for x in truth_path:
+            share = bank.observe(x, _z(grid, x))
+        assert lo <= share <= hi, (tell, share, bank.L)
+        if not tell:
+            mirror = bank.places(truth_path[-1])[np.argmax(bank.L)]
+            want = compose(CENTRE_TURN, truth_path[-1])
+            assert np.hypot(*(mirror[:2] - want[:2])) < 0.3
+
+
+def test_switch_swaps_the_estimate_and_its_rival_and_rebases_the_others():
+    grid = symmetric_room(tell=False)
+    bank = RivalBank(grid, _lf(grid), switch_odds=19.0)
+    x = np.array([2.0, 4.5, 0.3])
+    bank.G = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.5]])
+    bank.L = np.array([np.log(30.0), -1.0])
+    assert bank.winner() is None              # odds won over fewer scans than a window: not yet
+    bank.scans.extend([(x, None)] * bank.window)
+    assert bank.winner() == 0
+    where_before = bank.places(x)
+    g = bank.switch(0)
+    assert np.allclose(g, [1.0, 0.0, 0.0])
+    x_new = compose(g, x)
+    after = bank.places(x_new)
+    # the other rival still puts the robot where it did; the old estimate is now a rival, with the odds it lost by
+    assert np.allclose(after[0], where_before[1]) and np.allclose(after[1], x)
+    assert np.allclose(bank.L, [-1.0 - np.log(30.0), -np.log(30.0)])
+    assert bank.winner() is None
+    bank.L = np.array([np.log(18.0), 0.0])           # below the odds: no switch
+    assert bank.winner() is None
+
+
+def test_bad_arguments_say_what_is_wrong():
+    grid = symmetric_room()
+    with pytest.raises(ValueError, match="radius"):
+        RivalBank(grid, _lf(grid), radius=0.0)
+    with pytest.raises(ValueError, match="switch_odds"):
+        RivalBank(grid, _lf(grid), switch_odds=-1.0)
+    with pytest.raises((ValueError, TypeError), match="every"):
+        RivalBank(grid, _lf(grid), every=0)
+
+
+def _mirror_start_run(rivals: bool, seed: int = 0):
+    """A robot in the hall with the tell (a box in the bottom-right corner), driving towards it; the filter
+    starts sure of the mirror image of the start (the half turn about the hall's centre)."""
+    from localize.mcl import MCL
+    from localize.motion import OdometryMotion
+    from localize.reliability import ReliabilityState
+    from localize.runloop import Recorder, default_policies, run
+
+    grid = symmetric_room(tell=True)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 61)
+    r = sim.range_run(grid, np.random.default_rng(seed), n_steps=40, start=(2.0, 1.3, 0.0),
+                      waypoints=[(10.3, 1.3), (10.3, 4.7), (2.0, 4.7)], angles=angles, max_range=8.0, n_clutter=0)
+    lf = LikelihoodField(grid, 8.0, sigma_hit=0.1, temper=0.3)
+    f = MCL.gaussian(compose(CENTRE_TURN, r.poses[0]), (0.1, 0.1, 0.05), 1000, OdometryMotion(r.alphas, min_std=0.01),
+                     lf, rng=np.random.default_rng(100 + seed), grid=grid)
+    p = default_policies(f, grid=grid, state="probability")
+    p.state = ReliabilityState(grid, lf, rivals=rivals)
+    rec = Recorder()
+    events = run(f, len(r.poses), r.control, lambda k: (r.ranges[k], angles), policies=p, observers=[rec])
+    tr = rec.trace(events)
+    return r, tr, np.hypot(*(tr.poses[:, :2] - r.poses[:, :2]).T)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_filter_sure_of_the_mirror_image_moves_to_the_robot_once_the_tell_decides(seed):
+    """Without the bank the cloud stays on the mirror image, 'localized' while metres off (the scans fit it
+    until the robot sees the box, and then no particle is near the robot). With it, the bank's search finds the
+    robot's place, its odds grow once the box is in view, and the cloud moves there: the run ends within
+    0.3 m, and no step after the move is 'localized' more than 1 m off."""
+    _, tr_off, e_off = _mirror_start_run(False, seed)
+    assert e_off[-1] > 5.0 and np.any((tr_off.state == "localized") & (e_off > 5.0))
+    r, tr, e = _mirror_start_run(True, seed)
+    moves = [k for k, text in tr.events if "rival place" in text]
+    assert moves, tr.events
+    assert e[-1] < 0.3, (e[-1], tr.events)
+    after = np.arange(len(e)) > moves[-1]
+    assert not np.any((tr.state == "localized") & (e > 1.0) & after)
+
+
+def test_a_switch_waits_out_a_probation_and_is_taken_once():
+    """``ReliabilityState.take_switch``: a rival that won is taken once; during a restart's probation
+    (``allowed=False``) the moment passes and the bank keeps its rivals and odds as they were."""
+    from localize.reliability import ReliabilityState
+
+    grid = symmetric_room(tell=False)
+    state = ReliabilityState(grid, _lf(grid))
+    x = np.array([2.0, 4.5, 0.3])
+    state.rivals.G, state.rivals.L = np.array([[1.0, 0.0, 0.0]]), np.array([5.0])
+    state.last_pose = x.copy()
+    state.pending = 0
+    assert state.take_switch(allowed=False) is None
+    assert state.pending is None and np.allclose(state.rivals.L, [5.0]) and np.allclose(state.last_pose, x)
+    state.pending = 0
+    g = state.take_switch()
+    assert np.allclose(g, [1.0, 0.0, 0.0]) and np.allclose(state.last_pose, compose(g, x))
+    assert np.allclose(state.rivals.L, [-5.0])            # the old place, a rival now, with the odds it lost by
+    assert state.take_switch() is None                    # once
