@@ -507,7 +507,7 @@ plt.show()
 #
 # | policy | asks, at each step | does | where in the loop |
 # |---|---|---|---|
-# | `ReliabilityState` | how probable is it that the estimate is within a metre of the robot? | `p_localized`, and from it *searching*, *localized* or *lost* | `p.assess`, `p.conclude` |
+# | `ReliabilityState` | how probable is it that the estimate is within a metre of the robot? does a look-alike place fit better? | `p_localized`, and from it *searching*, *localized* or *lost*; moves the cloud to a rival place that wins | `p.assess`, `p.intervene`, `p.conclude` |
 # | `Redraw` | did every particle get zero likelihood, or leave the map? is the filter lost? | re-draws every particle; while lost, injects a share at each resampling | `p.intervene`, `p.injection` |
 # | `Restart` + `Probation` | has `p_localized` stayed below the *lost* threshold for several updates? | adds a fresh uniform cloud beside the old one; the scans pick the winner | `p.intervene` |
 # | `Expansion` | does the scan not fit the agreed place? | spreads the cloud a little wider (Ueda et al. 2004) | `p.assess` |
@@ -641,7 +641,28 @@ assert trace[2] > 0.99 and 3 <= below <= 5
 # corridor the scans never tell the estimate from the poses ahead and behind,
 # and the probe stays near a third.
 #
-# The belief and the smaller of the two masses are two estimates of the same
+# And a third thing: the **rivals**. A scan that fits the estimate well
+# says nothing about whether it would fit somewhere else as well: a room and
+# its mirror image, two offices with the same furniture. Once resampling has
+# settled the cloud on one of them, the particle filter no longer holds the
+# other. `localize.rivals.RivalBank` keeps a handful of them: every few scans
+# it searches the whole map for the places where the newest scan fits best
+# (a coarse-to-fine search, `localize.placesearch`), and each place it keeps
+# is the estimate's own trajectory moved rigidly (a transform $G$ of the map:
+# if the estimate is at $x_t$, the rival puts the robot at $G \circ x_t$).
+# Every scan is scored at the estimate and at each rival with the sensor
+# model of chapter 6, and each rival keeps its log-odds against the estimate,
+# $L_i \leftarrow L_i + \ell_t(G_i \circ x_t) - \ell_t(x_t)$, over every
+# scan since the place was chosen: the histogram filter of chapter 2 again,
+# over a handful of places. The estimate's share of that posterior,
+# $1/(1 + \sum_i e^{L_i})$, is the third estimate of being right (a mirror
+# image that fits as well holds it at a half). When a rival becomes 19 times
+# more probable than the estimate (the odds of *localized*, 0.95) while the
+# estimate itself still fits, the run loop moves the cloud there by $G$, and
+# the old place becomes a rival: the decision can be taken back by later
+# scans, which a restart that lands on the same look-alike again could not.
+#
+# The belief and the smallest of the masses are estimates of the same
 # probability, each from other evidence. Multiplied, they would count the
 # doubt twice: two estimates of 0.7 give 0.49. `p_localized` is their
 # **geometric mean**, $\sqrt{b\,m}$, which counts it once; the state is
@@ -660,37 +681,38 @@ for seed, (r_s, tr_s) in runs.items():
     ps.append(tr_s.p_localized)
     rights.append(e_s <= 1.0)
     off = np.flatnonzero((tr_s.state == "localized") & (e_s > 1.0))
+    moved = [k for k, text in tr_s.events if "rival place" in text]
     print(f"robot {seed}: {off.size:2d} steps called localized while more than 1 m off"
-          + (f" (steps {off[0]}-{off[-1]}, up to {e_s[off].max():.0f} m)" if off.size else ""))
+          + (f" (steps {off[0]}-{off[-1]}, up to {e_s[off].max():.0f} m)" if off.size else "")
+          + (f"; the cloud moved to a rival place at step {', '.join(map(str, moved))}" if moved else ""))
 ps, rights = np.concatenate(ps), np.concatenate(rights)
 rows = reliability_table(ps, rights, n_bins=5, min_count=1)
 for lo, hi, n_bin, mean_p, share in rows:
     print(f"p_localized {lo:.1f}-{hi:.1f}: {n_bin:3d} steps, mean p {mean_p:.2f}, right {share:.2f}")
 sure = ps >= LOCALIZED_AT
 print(f"steps with p_localized >= {LOCALIZED_AT}: {sure.sum()}, of them more than 1 m off: {np.sum(~rights[sure])}")
-off_0 = np.flatnonzero((runs[0][1].state == "localized") & (position_error(runs[0][1].poses, runs[0][0].poses) > 1))
-off_1 = np.flatnonzero((runs[1][1].state == "localized") & (position_error(runs[1][1].poses, runs[1][0].poses) > 1))
-assert off_0.size >= 8 and off_0[0] == KIDNAP                      # robot 0: slow to notice (text below)
-assert np.sum(off_1 > KIDNAP + 5) >= 8                            # robot 1: a look-alike after the search
-assert 0.7 < np.mean(rights[sure]) < 0.97                           # "sure" is mostly, not always, right
+for seed, (r_s, tr_s) in runs.items():                            # only the kidnapping's first steps (text below)
+    off = np.flatnonzero((tr_s.state == "localized") & (position_error(tr_s.poses, r_s.poses) > 1))
+    assert off.size <= 5 and np.all((off >= KIDNAP) & (off < KIDNAP + 5)), (seed, off)
+assert 0.7 < np.mean(rights[sure]) < 0.99                           # "sure" is mostly, not always, right
 
 # %% [markdown]
-# Two of the four robots show what this probability cannot do yet. Robot 0
-# is carried to a place whose scans fit the map around the old estimate
-# moderately (a third to a half of the beams): evidence the calibration rates
-# only weakly against a right estimate, so `p_localized` falls over a dozen
-# steps instead of two, and the state says *localized* all that while.
-# Robot 1 notices the kidnapping within four steps, searches, and then settles on a
-# look-alike room where the scans fit as well as at the robot's true place; no
-# evidence of the scan's fit can tell the two apart, and the probability says
-# "sure". The right answer there is not a better threshold but more evidence:
-# driving on until a scan sees what differs. This is why the command line
-# keeps the threshold state as its default for now (`localize run --state
-# probability` turns this one on), and `benchmarks/RESULTS.md`
-# (`bench_global_state_probability`) measures both on real logs and maps
-# that neither was chosen on. Chapter 9 adds the policies a real log needs
-# (odometry records that are wrong, a robot that stands still, beams that hit
-# what the map does not show).
+# Every robot is called *localized* while more than a metre off only in
+# the first steps after the kidnapping: a belief built on many good scans
+# gives way only after a few poor ones, the arithmetic above. None of them
+# settles on a look-alike room and calls it sure: where the search after the
+# kidnapping lands on a place whose scans fit about as well as the true one,
+# the rival bank holds the true place as a rival and moves the cloud there
+# once the scans tell the two apart (the lines above name the robots and the
+# steps). What the probability still gets wrong is
+# named by the state tests of `tests/test_state_scenarios.py` (in a long
+# featureless corridor, four rivals are not the corridor's continuum of
+# look-alikes) and measured on real logs and maps that none of this was
+# chosen on (`benchmarks/RESULTS.md`, `bench_global_state_probability`).
+# This is why the command line keeps the threshold state as its default for
+# now (`localize run --state probability` turns this one on). Chapter 9 adds
+# the policies a real log needs (odometry records that are wrong, a robot
+# that stands still, beams that hit what the map does not show).
 #
 # ## Summary
 #
@@ -708,7 +730,9 @@ assert 0.7 < np.mean(rights[sure]) < 0.97                           # "sure" is 
 #   re-drawing and injecting while lost, restarting on probation.
 # * **Am I localized?** is a probability, `p_localized`: chapter 1's Bayes
 #   filter over "the estimate is right", with evidence models calibrated on
-#   your own map and sensor model, not on a benchmark.
+#   your own map and sensor model, not on a benchmark, weighed against the
+#   look-alike places a rival bank keeps (chapter 2's filter over a handful
+#   of places).
 #
 # ## Exercises
 #
