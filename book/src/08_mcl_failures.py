@@ -841,3 +841,43 @@ print(check.injection(injection))
 # the same averages in log space, since a scan's likelihood underflows.)
 #
 # </details>
+
+# %% [markdown]
+# **5 (experiment).** The rival bank in the hall with its tell. Simulate a
+# robot in `maps.symmetric_room(tell=True)` that drives from (2, 1.3) towards
+# the box, and start a filter *sure of the mirror image* of its start (the
+# half turn about the hall's centre, `compose([12, 6, π], pose)`). Run it with
+# `runloop.run` and the policies of `default_policies(..., state="probability")`,
+# once as they are and once with `p.state = ReliabilityState(grid, lf,
+# rivals=False)`. At which step does the bank move the cloud (the run's
+# events say), and what does `p_localized` say before the move? Without the
+# bank, what does the state say at the end, and how far off is the estimate?
+
+# %% jupyter={"outputs_hidden": true, "source_hidden": true} tags=["solution", "hide-cell"]
+# Solution (click to show)
+# Exercise 5
+from localize.geometry import compose  # noqa: E402
+from localize.reliability import ReliabilityState  # noqa: E402
+from localize.runloop import Recorder, default_policies, run  # noqa: E402
+
+tell_hall = maps.symmetric_room(tell=True)
+lf_tell = LikelihoodField(tell_hall, 8.0, sigma_hit=0.1, temper=0.3)
+fov = np.linspace(-np.pi / 2, np.pi / 2, 61)
+r5 = range_run(tell_hall, np.random.default_rng(0), n_steps=40, start=(2.0, 1.3, 0.0),
+               waypoints=[(10.3, 1.3), (10.3, 4.7), (2.0, 4.7)], angles=fov, max_range=8.0, n_clutter=0)
+for bank in (True, False):
+    f5 = MCL.gaussian(compose([12.0, 6.0, np.pi], r5.poses[0]), (0.1, 0.1, 0.05), 1000,
+                      OdometryMotion(r5.alphas, min_std=0.01), lf_tell, rng=np.random.default_rng(100), grid=tell_hall)
+    p5 = default_policies(f5, grid=tell_hall, state="probability")
+    p5.state = ReliabilityState(tell_hall, lf_tell, rivals=bank)
+    rec5 = Recorder()
+    tr5 = rec5.trace(run(f5, len(r5.poses), r5.control, lambda k: (r5.ranges[k], fov), policies=p5, observers=[rec5]))
+    e5 = position_error(tr5.poses, r5.poses)
+    moves = [k for k, text in tr5.events if "rival place" in text]
+    print(f"bank {'on ' if bank else 'off'}: moved at step {moves or 'never'}; p_localized before: "
+          f"{np.round(tr5.p_localized[:moves[0] + 1], 2).tolist() if moves else '-'}; "
+          f"end: {tr5.state[-1]}, {e5[-1]:.1f} m off")
+# With the bank the filter doubts at once (the mirror image and the robot's place fit the first scans alike, so
+# the estimate's share is near a half), and once the box is in view the robot's place wins and the cloud moves.
+# Without it the cloud never leaves the mirror image, and the state ends "localized", metres off: a filter cannot
+# weigh a place it does not hold (deprivation, the first failure of this chapter).
