@@ -27,7 +27,7 @@ to fine) on the likelihood field of chapter 6.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,7 +37,7 @@ from .geometry import compose
 from .grid import OccupancyGrid
 from .sensors import LikelihoodField
 
-__all__ = ["COARSE_SIGMA", "COARSE_HEADINGS", "coarse_model", "lattice", "best_places", "climb", "stencil"]
+__all__ = ["COARSE_SIGMA", "COARSE_HEADINGS", "coarse_model", "lattice", "best_places", "climb", "climb_on", "stencil", "scores"]
 
 #: Standard deviation (m) of the blurred likelihood field the search scores with: half the spacing of its
 #: lattice of positions (1 m), and about how far a 10-degree heading step moves an end point 5 m away (0.44 m).
@@ -81,7 +81,8 @@ def lattice(grid: OccupancyGrid, spacing: float, rng: np.random.Generator) -> ND
     return xy[grid.is_free(xy)]
 
 
-def _scores(sensor: Any, poses: NDArray, z: tuple) -> NDArray[np.float64]:
+def scores(sensor: Any, poses: NDArray, z: tuple) -> NDArray[np.float64]:
+    """The sensor model's log-likelihood of the scan ``z`` at ``poses``; -inf where it cannot score one."""
     with np.errstate(divide="ignore", invalid="ignore"):
         ll = np.asarray(sensor.log_likelihood(poses, *z), dtype=float)
     return np.where(np.isfinite(ll), ll, -np.inf)      # a pose the model cannot score ranks last
@@ -102,17 +103,23 @@ def climb(sensor: Any, poses: NDArray, z: tuple, steps: NDArray, iterations: int
     >>> np.round(p, 1), bool(ll[0] > -1e-3)
     (array([[1. , 2. , 0.3]]), True)
     """
+    return climb_on(lambda p: scores(sensor, p, z), poses, steps, iterations)
+
+
+def climb_on(score: Callable[[NDArray], NDArray], poses: NDArray, steps: NDArray,
+             iterations: int = 10) -> tuple[NDArray, NDArray]:
+    """:func:`climb` with any score of poses ``(N, 3) -> (N,)`` (e.g. a window of scans); ``(poses, scores)``."""
     poses = np.array(poses, dtype=float)
     moves = np.vstack([np.zeros(3), np.asarray(steps, dtype=float)])
-    score = np.full(len(poses), -np.inf)
+    score_now = np.full(len(poses), -np.inf)
     for _ in range(int(iterations)):
         cand = compose(poses[:, None, :], moves[None, :, :])                  # (N, 1 + M, 3)
-        ll = _scores(sensor, cand.reshape(-1, 3), z).reshape(len(poses), len(moves))
+        ll = score(cand.reshape(-1, 3)).reshape(len(poses), len(moves))
         k = np.argmax(ll, axis=1)
-        poses, score = cand[np.arange(len(poses)), k], ll[np.arange(len(poses)), k]
+        poses, score_now = cand[np.arange(len(poses)), k], ll[np.arange(len(poses)), k]
         if np.all(k == 0):
             break
-    return poses, score
+    return poses, score_now
 
 
 def stencil(xy: float, heading: float, levels: int) -> NDArray[np.float64]:
@@ -187,7 +194,7 @@ def best_places(grid: OccupancyGrid, sensor: Any, z: tuple, rng: np.random.Gener
     cand = cand[allowed(cand)]
     if len(cand) == 0:
         return np.empty((0, 3)), np.empty(0)
-    ll = _scores(coarse, cand, z)
+    ll = scores(coarse, cand, z)
     best = _distinct(cand, np.argsort(ll)[::-1], n_best, spacing)
     places, p_ll = climb(sensor, best, z, stencil(0.5 * spacing, 0.5 * step, 6))
     ok = allowed(places)

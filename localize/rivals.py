@@ -58,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 from ._checks import check_count, check_positive
 from .geometry import compose, inverse, relative
 from .grid import OccupancyGrid
-from .placesearch import best_places, coarse_model, stencil
+from .placesearch import best_places, climb_on, coarse_model, scores, stencil
 from .resample import logsumexp
 
 __all__ = ["RivalBank"]
@@ -73,12 +73,6 @@ TRACK_MOVES = np.vstack([np.zeros(3), stencil(0.1, 0.03, 2)])
 #: Places the search finds per rival kept: the newest scan alone ranks many look-alikes alike (every corner of
 #: a room fits a scan of a corner); the window of scans ranks them again, and the best are kept.
 SEARCHED = 4
-
-
-def _scores(sensor: Any, poses: NDArray, z: tuple) -> NDArray[np.float64]:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ll = np.asarray(sensor.log_likelihood(poses, *z), dtype=float)
-    return np.where(np.isfinite(ll), ll, -np.inf)
 
 
 class RivalBank:
@@ -158,7 +152,7 @@ class RivalBank:
         if len(self.G):
             hyps = np.vstack([pose[None], self.places(pose)])
             cand = compose(hyps[:, None, :], TRACK_MOVES[None, :, :])             # (1 + R, M, 3)
-            ll = _scores(self.sensor, cand.reshape(-1, 3), z).reshape(len(hyps), len(TRACK_MOVES))
+            ll = scores(self.sensor, cand.reshape(-1, 3), z).reshape(len(hyps), len(TRACK_MOVES))
             best = np.argmax(ll, axis=1)
             ll = ll[np.arange(len(hyps)), best]
             if np.isfinite(ll[0]):
@@ -178,22 +172,12 @@ class RivalBank:
         scans = list(self.scans)[-self.window:] if scans is None else scans
         ll = np.zeros(len(hyps))
         for j, (_, z) in enumerate(scans):
-            ll += _scores(self.sensor, compose(hyps, shape[j][None]), z)
+            ll += scores(self.sensor, compose(hyps, shape[j][None]), z)
         return ll
 
     def _climb(self, hyps: NDArray, shape: NDArray, iterations: int = 8) -> tuple[NDArray, NDArray]:
-        """Hill-climb each hypothesis on the window's log-likelihood."""
-        moves = np.vstack([np.zeros(3), stencil(0.25, 0.05, 4)])
-        ll = self._window_ll(hyps, shape)
-        for _ in range(iterations):
-            cand = compose(hyps[:, None, :], moves[None, :, :]).reshape(-1, 3)
-            c_ll = self._window_ll(cand, shape).reshape(len(hyps), len(moves))
-            k = np.argmax(c_ll, axis=1)
-            if np.all(k == 0):
-                break
-            hyps = cand.reshape(len(hyps), len(moves), 3)[np.arange(len(hyps)), k]
-            ll = c_ll[np.arange(len(hyps)), k]
-        return hyps, ll
+        """Hill-climb each hypothesis on the window's log-likelihood (:func:`localize.placesearch.climb_on`)."""
+        return climb_on(lambda p: self._window_ll(p, shape), hyps, stencil(0.25, 0.05, 4), iterations)
 
     def search(self, pose: NDArray) -> None:
         """Hill-climb the rivals on the window, add the best new places for the newest scan, keep the best."""
