@@ -481,10 +481,14 @@ class ReliabilityState:
     radius 0.1-0.4 more often than it said). The geometric mean counts it once
     (a logarithmic opinion pool with equal weights), and the thresholds on it
     are those the product had, restated (0.95 and 0.7 are about the roots of
-    0.9 and 0.5): the state and the run are as before up to that rounding, and
-    the probability is much closer to calibrated (on the held-out draw within
+    0.9 and 0.5). Before the rival bank, that brought the held-out draw within
     0.1 in eight of ten bins, at most 0.15 off, against 0.35 for the product;
-    ``benchmarks/RESULTS.md``, ``bench_global_held_out_state_probability``).
+    with the bank the middle bins are cautious by up to 0.26 (a rival that fits
+    as well holds the share near a half, and on real logs it is seldom the
+    robot's place), while the bin above 0.9, which holds 99% of the scans,
+    stays within 0.01 (``benchmarks/RESULTS.md``,
+    ``bench_global_held_out_state_probability`` and
+    ``bench_global_experiments_stop48``).
 
     The state is derived from it: ``localized`` once ``p_localized`` reaches
     ``localized_at``; a localized filter turns ``lost`` when it falls below
