@@ -291,6 +291,11 @@ def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, 
             "searching: no single, well-fitting hypothesis yet; localized: one cluster holds most of the weight, "
             "is tight, and the scans fit the map there; lost: it was localized and no longer is (no map: "
             "see localize.policies.StateRules)")
+    if "stated_max_range" in log.meta:
+        out["max_range"] = {"stated_m": log.meta["stated_max_range"], "used_m": round(float(log.max_range), 4),
+                            "source": log.meta.get("max_range_source"),
+                            "meaning": "the readings above the range the log states are measurements, not 'no "
+                                       "return' (see localize.pipeline.check_log_max_range); --max-range caps it"}
     chk = getattr(res, "odometry_check", None)
     if chk is not None:
         out["odometry_sign"] = {**chk.summary(), "meaning": (

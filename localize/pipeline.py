@@ -13,6 +13,7 @@ smoother (:mod:`localize.smooth`), the benchmarks and chapter 9 import:
 * :func:`make_sensor`, :func:`kld_sampling`, :func:`augmented_filter`,
   :func:`auto_particles` -- the pieces it builds from the settings;
 * :func:`check_log_odometry` -- the scans' check of the odometry's sign;
+* :func:`check_log_max_range` -- the readings' check of the maximum range the log states;
 * :func:`converged_at` -- when a trajectory's error (or spread) settles.
 
 Examples
@@ -46,7 +47,7 @@ from .grid import OccupancyGrid
 from .motion import ReversibleOdometry
 from .settings import DEFAULTS, LEGACY_NAMES, RunSettings
 
-__all__ = ["RunResult", "localize_log", "make_sensor", "check_log_odometry", "auto_particles", "resolve_particles",
+__all__ = ["RunResult", "localize_log", "make_sensor", "check_log_odometry", "check_log_max_range", "auto_particles", "resolve_particles",
            "converged_at", "kld_sampling", "augmented_filter", "settings_with", "read_log_file", "read_map_file",
            "read_inputs", "Inputs", "check_free_space", "map_summary", "AUTO_PARTICLES", "ODOMETRY_SIGN",
            "read_reference", "match_reference", "MapCheck", "check_map", "particles_for_area", "scanned_area"]
@@ -254,6 +255,71 @@ class RunResult:
         return self.seconds / max(len(self.times), 1)
 
 
+# ============================================================================ maximum range
+#: A laser says "no return" with one value (its maximum, or an error code; a few lasers have a handful of
+#: codes). Readings above the stated maximum that take at least this many values are measurements.
+MAX_RANGE_DISTINCT = 20
+#: ... and at least this share of the readings: fewer change little whether they are used or not.
+MAX_RANGE_SHARE = 0.01
+
+
+def _warn_user(message: str) -> None:
+    warnings.warn(message, UserWarning, stacklevel=4)   # at the caller of localize_log or smooth_log
+
+
+def check_log_max_range(log, warn: Callable[[str], None] | None = None):
+    """``(log, message)``: the log with the maximum range its readings show, when its stated one is too short.
+
+    Readings at or above a log's ``max_range`` mean "no return". A header can
+    understate the laser's reach (a configuration copied from another laser,
+    a driver's default): then a reader that believes it throws most of the
+    scan away, and the filter localizes on the few short beams that are left.
+    A laser reports "no return" as one value (or a handful of error codes);
+    measurements take a continuum of values. When at least
+    :data:`MAX_RANGE_DISTINCT` distinct values, and at least
+    :data:`MAX_RANGE_SHARE` of the readings, lie above the stated maximum,
+    they are measurements, and the log's ``max_range`` becomes its largest
+    reading (readings equal to the stated maximum still mean "no return").
+    ``message`` says what was changed (also sent to ``warn``); it is None,
+    and the log is returned as it is, otherwise. ``--max-range`` (the
+    setting) still caps the range a run uses.
+
+    Examples
+    --------
+    >>> from localize.io import LaserLog
+    >>> rng = np.random.default_rng(0)
+    >>> ranges = rng.uniform(0.5, 12.0, (20, 90))                 # a 12 m laser ...
+    >>> ranges[:, 0] = 2.5                                       # ... whose no-return code is 2.5
+    >>> log = LaserLog(times=np.arange(20.0), odometry=np.zeros((20, 3)), ranges=ranges,
+    ...                angles=np.linspace(-1.5, 1.5, 90), max_range=2.5)   # ... in a log that states 2.5 m
+    >>> fixed, msg = check_log_max_range(log)
+    >>> round(fixed.max_range, 2), bool(fixed.no_return[:, 0].all()), int(fixed.no_return[:, 1:].sum())
+    (12.0, True, 1)
+    >>> print(msg)
+    the log states a maximum range of 2.5 m, but 82% of its readings lie above it (1472 distinct values, up to 12 m): they are measurements, so the run uses 12 m (--max-range 2.5 keeps the stated one)
+    >>> check_log_max_range(fixed)[1] is None                     # nothing above the maximum now
+    True
+    """
+    stated = float(log.max_range)
+    above = log.ranges[log.ranges > stated]
+    distinct = int(np.unique(above).size)
+    share = above.size / log.ranges.size
+    if distinct < MAX_RANGE_DISTINCT or share < MAX_RANGE_SHARE:
+        return log, None
+    reach = float(above.max())
+    msg = (f"the log states a maximum range of {stated:g} m, but {share:.0%} of its readings lie above it "
+           f"({distinct} distinct values, up to {reach:.3g} m): they are measurements, so the run uses "
+           f"{reach:.3g} m (--max-range {stated:g} keeps the stated one)")
+    ranges = np.where(log.ranges == stated, reach, log.ranges)      # the stated maximum still means no return
+    log = replace(log, ranges=ranges, max_range=reach,
+                  meta={**log.meta, "stated_max_range": stated,
+                        "max_range_source": f"largest reading ({distinct} distinct values above the stated "
+                                            f"{stated:g} m, {share:.0%} of the readings)"})
+    if warn is not None:
+        warn(msg)
+    return log, msg
+
+
 # ============================================================================ odometry
 #: ``--odometry-sign``: when the scans may reverse odometry steps (see :func:`check_log_odometry`).
 ODOMETRY_SIGN = ("auto", "check", "trust")
@@ -338,6 +404,7 @@ def localize_log(grid: OccupancyGrid, log, settings: RunSettings | None = None, 
     check_rng(rng)
     s = settings_with(settings, **changes)
     n_particles = resolve_particles(s.particles, grid)
+    log, _ = check_log_max_range(log, _warn_user if s.max_range is None or s.max_range > log.max_range else None)
     log, sign_check = check_log_odometry(log, s.odometry_sign, min_range=s.min_range)
     if s.beams is not None and s.beams < log.n_beams:
         log = log.select_beams(count=s.beams)
@@ -473,7 +540,8 @@ def read_log_file(path: Path, format: str | None = None, *, scan_topic: str | No
         if laser_pose is not None:
             log = replace(log, sensor_offset=np.asarray(laser_pose, dtype=float),
                           meta={**log.meta, "sensor_offset_source": "given (--laser-pose)"})
-    if min_range:
+    log, _ = check_log_max_range(log, None if warn is None else (lambda m: warn(f"{path}: {m}")))
+    if min_range:                                   # after it: a short reading becomes the real "no return"
         r = np.array(log.ranges, copy=True)
         r[r < min_range] = log.max_range
         log = replace(log, ranges=r, meta={**log.meta, "min_range": min_range})

@@ -216,7 +216,8 @@ class RunSettings:
         30.0, "sensor model's maximum range; longer readings are 'no return' (None: the log's)",
         _optional(_metres), unit="metres", valid="> 0", metavar="M", cli_help="""
         sensor model's maximum range in metres; longer readings count as 'no return' (default {default}).
-        Example: --max-range 20""")
+        A log whose readings go beyond the range it states is read with the range they show, and the run says
+        so; --max-range at or below the stated range keeps it. Example: --max-range 20""")
     alphas: tuple[float, float, float, float] = setting(
         (0.05, 0.01, 0.02, 0.05), "odometry noise alpha1..alpha4 of PR table 5.6 (variances)", _alphas,
         unit="variance factors", valid="four numbers >= 0", metavar=("A1", "A2", "A3", "A4"), nargs=4, cli_help="""

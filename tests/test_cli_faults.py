@@ -402,3 +402,26 @@ def test_a_ctrl_c_raised_in_a_finalizer_without_a_signal_still_stops_the_results
     status, _, err = small(files, out, "--seed", 2)
     assert status == 130 and "nothing written" in err
     assert listing(out) == sorted(before) and all((out / n).read_bytes() == b for n, b in before.items())
+
+
+def test_a_log_that_understates_its_maximum_range_is_run_with_the_range_its_readings_show(tmp_path):
+    grid = maps.office(0.1)
+    run = sim.range_run(grid, np.random.default_rng(8), n_steps=8, dt=0.5, angles=io.carmen_angles(181),
+                        max_range=12.0)
+    log = io.LaserLog(times=run.times, odometry=run.poses, ranges=run.ranges, angles=run.angles, max_range=12.0,
+                      poses=run.poses)
+    path = io.write_carmen_log(tmp_path / "sim.log", log)
+    text = path.read_text()
+    assert "PARAM robot_front_laser_max 12 " in text
+    path.write_text(text.replace("PARAM robot_front_laser_max 12 ", "PARAM robot_front_laser_max 2.5 "))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")             # said once, in the command line's own style
+        status, _, err = run_cli("run", "--log", path, "--build-map", "--resolution", 0.1, "--particles", 200,
+                                 "--out", tmp_path / "o")
+    assert status == 0, err
+    said = [line for line in err.splitlines() if "maximum range" in line]
+    assert len(said) == 1 and said[0].startswith(f"localize: warning: {path}: the log states a maximum range of "
+                                                 "2.5 m, but ")
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["max_range"]["stated_m"] == 2.5
+    assert summary["max_range"]["used_m"] == 12.0          # the laser's own no-return value, its real reach

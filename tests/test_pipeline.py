@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 import pytest
@@ -96,3 +97,81 @@ def test_read_inputs_selects_scans_and_builds_the_map(tmp_path):
     assert len(got) == 8 and np.allclose(got.poses, run.poses[2:10], atol=1e-3)
     assert desc == f"built from {path} (resolution 0.1 m)" and built.resolution == 0.1 and built.free.any()
     assert warnings == []
+
+
+# ============================================================================ the maximum range a log states
+def _ranges_log(ranges, max_range: float) -> io.LaserLog:
+    ranges = np.asarray(ranges, dtype=float)
+    k, b = ranges.shape
+    return io.LaserLog(times=np.arange(k, dtype=float), odometry=np.zeros((k, 3)), ranges=ranges,
+                       angles=np.linspace(-1.5, 1.5, b), max_range=max_range)
+
+
+def test_readings_above_an_understated_maximum_are_used_and_the_stated_value_stays_no_return():
+    rng = np.random.default_rng(4)
+    r = rng.uniform(0.3, 9.0, (40, 60))
+    r[:, ::7] = 4.0                                      # the stated maximum: what the laser said for no return
+    fixed, msg = pipeline.check_log_max_range(_ranges_log(r, 4.0))
+    assert fixed.max_range == pytest.approx(r.max())
+    assert np.array_equal(fixed.no_return, (r == 4.0) | (r == r.max()))
+    keep = r != 4.0
+    assert np.array_equal(fixed.ranges[keep], r[keep])   # every measurement as it was read
+    assert fixed.meta["stated_max_range"] == 4.0 and "largest reading" in fixed.meta["max_range_source"]
+    above = float(np.mean(r > 4.0))
+    assert f"{above:.0%} of its readings lie above it" in msg and "--max-range 4 keeps" in msg
+
+
+@pytest.mark.parametrize("codes", [[81.91], [8.183, 8.19, 8.191, 65.533, 65.534]])
+def test_no_return_codes_above_the_stated_maximum_are_not_measurements(codes):
+    """A SICK log states 81.83 m and writes 81.91 for no return; some lasers have a handful of error codes."""
+    rng = np.random.default_rng(5)
+    stated = min(codes) - 0.01
+    r = rng.uniform(0.3, stated - 0.1, (50, 90))
+    r[rng.random(r.shape) < 0.3] = rng.choice(codes, size=int(np.sum(rng.random(r.shape) < 0.3)))[0]
+    r[:, :len(codes)] = codes                            # every code, on every scan
+    log = _ranges_log(r, stated)
+    fixed, msg = pipeline.check_log_max_range(log)
+    assert fixed is log and msg is None
+
+
+def test_a_few_stray_readings_above_the_maximum_do_not_change_the_log():
+    rng = np.random.default_rng(6)
+    r = rng.uniform(0.3, 29.0, (100, 100))
+    stray = rng.choice(r.size, size=int(0.005 * r.size), replace=False)      # 0.5%: 50 distinct values
+    r.flat[stray] = rng.uniform(30.5, 60.0, stray.size)
+    log = _ranges_log(r.copy(), 30.0)
+    assert pipeline.check_log_max_range(log) == (log, None)
+    r.flat[rng.choice(r.size, size=int(0.02 * r.size), replace=False)] = rng.uniform(30.5, 60.0, 200)   # 2%: used
+    assert pipeline.check_log_max_range(_ranges_log(r, 30.0))[0].max_range > 30.0
+
+
+def test_a_run_uses_the_readings_unless_max_range_keeps_the_stated_one(office_run):
+    grid, log = office_run                                   # a 10 m laser
+    short = dataclasses.replace(log, max_range=3.0)          # whose log says 3 m
+    with pytest.warns(UserWarning, match="states a maximum range of 3 m"):
+        a = pipeline.localize_log(grid, short, RunSettings(particles=300, track=True), rng=np.random.default_rng(0))
+    b = pipeline.localize_log(grid, dataclasses.replace(log, max_range=float(log.ranges.max())),
+                              RunSettings(particles=300, track=True), rng=np.random.default_rng(0))
+    assert _same(a, b)                                        # the run with the range the readings show
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                       # the user kept the stated range: nothing to say
+        c = pipeline.localize_log(grid, short, RunSettings(particles=300, track=True, max_range=3.0),
+                                  rng=np.random.default_rng(0))
+    assert np.median(c.trace.n_valid) < np.median(a.trace.n_valid)
+
+
+def test_reading_a_log_file_checks_its_maximum_range_before_min_range(tmp_path):
+    rng = np.random.default_rng(7)
+    r = rng.uniform(0.05, 9.0, (30, 181))
+    log = io.LaserLog(times=np.arange(30.0), odometry=np.zeros((30, 3)), ranges=r, angles=io.carmen_angles(181),
+                      max_range=9.5)
+    path = io.write_carmen_log(tmp_path / "short.log", log)
+    text = path.read_text()
+    assert "PARAM robot_front_laser_max 9.5 " in text
+    path.write_text(text.replace("PARAM robot_front_laser_max 9.5 ", "PARAM robot_front_laser_max 3 "))  # says 3 m
+    said = []
+    got = pipeline.read_log_file(path, min_range=0.2, warn=said.append)
+    assert len(said) == 1 and said[0].startswith(f"{path}: the log states a maximum range of 3 m")
+    assert got.max_range > 8.5
+    short = np.asarray(io.read_log(path).ranges) < 0.2
+    assert short.any() and np.all(got.ranges[short] == got.max_range)   # below min_range: the real no return
