@@ -7,7 +7,8 @@ estimate (:func:`scan_fits`, as :func:`localize.evidence.scan_fit`). The Bayes f
 (:mod:`localize.discrete`) turns that evidence into a belief, scan by scan:
 
 * **prediction**: a right estimate stays right with probability
-  ``1 - p_lose`` per scan; a wrong one becomes right only with ``p_find``
+  ``1 - p_lose`` per step (:class:`ReliabilityState`: per update of the
+  particle filter, not per scan of the log); a wrong one becomes right only with ``p_find``
   (:class:`ReliabilityState` uses 0: the particle filter finds the robot by
   moving its estimate, and a new place is a new hypothesis);
 * **correction**: ``p(fit | right)`` and ``p(fit | wrong)``, the
@@ -504,8 +505,11 @@ class ReliabilityState:
     right_radius : float
         What "right" means (metres).
     p_change : float
-        Per scan, the chance that a right place becomes wrong (the robot slips or is carried away) without
-        the estimate jumping (``p_lose`` of :class:`LocalizedBelief`). A wrong place never becomes right
+        Per update (a step at which the filter used its scan: the robot moved enough for the motion gate),
+        the chance that a right place becomes wrong (the robot slips or is carried away) without the
+        estimate jumping (``p_lose`` of :class:`LocalizedBelief`). Not per scan: a robot that stands
+        still does not get lost by waiting, and a laser that scans at 40 Hz is no more hazardous than one
+        at 5 Hz (``tests/test_state_scenarios.py``, the waiting robot). A wrong place never becomes right
         by itself (``p_find`` 0): the filter finds the robot by moving its estimate to another place, and
         that starts a new hypothesis; without evidence the probability only falls.
     localized_at, lost_below : float
@@ -629,7 +633,8 @@ class ReliabilityState:
         if self.jumped(step):
             self._new_place()
         self.last_pose = np.array(step.pose, dtype=float)
-        self.belief.predict()
+        if step.updated:                    # a step the filter used: the robot moved (the scan rate is no hazard)
+            self.belief.predict()
         if step.degenerate or step.off_map:
             self.belief.belief = np.array([1.0, 0.0])
         elif step.updated and step.scan is not None and step.n_valid > 0:

@@ -328,3 +328,34 @@ def walking_person(start: int = 60, n_scans: int = 20, ahead: float = 0.6, radiu
                    f"{start}-{start + n_scans - 1}", _at(range(start, start + n_scans), len(r)), ranges=ranges)
     sc.extra["blocked"] = blocked
     return sc
+
+
+def waiting_robot(drive: int = 80, wait: int = 300, sigma: float = 0.01) -> Scenario:
+    """The robot drives ``drive`` scans, then stands still for ``wait`` scans (at a door, in a queue).
+
+    The laser keeps scanning while it waits: the same view, with fresh noise of
+    ``sigma`` m per reading; the odometry does not move, so the filter (which
+    weights its particles only after some motion) uses none of those scans. A
+    robot that stands still does not get lost, and a laser's scan rate is no
+    hazard: 300 scans are 30 s at 10 Hz, 7.5 s at 40 Hz.
+
+    Examples
+    --------
+    >>> sc = waiting_robot()
+    >>> len(sc.log), bool(np.all(sc.log.odometry[80:] == sc.log.odometry[79])), int(sc.fault.sum())
+    (380, True, 300)
+    """
+    r = _drive(rooms(), n_steps=drive)
+    log = r.to_log()
+    rng = np.random.default_rng(11)
+    last = np.asarray(log.ranges[-1])
+    still = np.where(last >= log.max_range, last,
+                     np.clip(last + rng.normal(0.0, sigma, (wait, last.size)), 0.0, log.max_range))
+    dt = float(np.median(np.diff(log.times)))
+    log = replace(log, times=np.concatenate([log.times, log.times[-1] + dt * np.arange(1, wait + 1)]),
+                  odometry=np.vstack([log.odometry, np.repeat(log.odometry[-1:], wait, axis=0)]),
+                  ranges=np.vstack([log.ranges, still]),
+                  poses=np.vstack([log.poses, np.repeat(log.poses[-1:], wait, axis=0)]))
+    fault = np.concatenate([np.zeros(drive, dtype=bool), np.ones(wait, dtype=bool)])
+    return Scenario(name="waiting robot", grid=rooms(), log=log, truth=np.asarray(log.poses), fault=fault,
+                    note=f"drives {drive} scans, then stands still for {wait} scans")

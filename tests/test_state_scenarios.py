@@ -338,3 +338,17 @@ def test_the_checks_catch_a_dishonest_state():
     rising = np.linspace(0, 1, err.size)
     with pytest.raises(AssertionError, match="p_localized rose"):
         check_no_evidence_claimed(fake(rising, np.where(dead, "lost", state)), dead)
+
+
+def test_a_robot_that_waits_stays_localized():
+    """The robot stands still for 300 scans after driving 80: the laser keeps scanning, the filter uses none of
+    those scans (no motion), and nothing suggests the estimate went wrong. The state stays localized and
+    ``p_localized`` does not fall with the count of scans: how fast a laser scans is no hazard."""
+    sc = S.waiting_robot()
+    for seed in SEEDS:
+        tr, err, state = honest_run(sc, seed, keep_when_near=True)
+        wait = np.flatnonzero(sc.fault)
+        assert np.all(state[wait] == "localized"), f"seed {seed}: " + _show(wait[state[wait] != "localized"], err,
+                                                                            state)
+        p = np.asarray(tr.p_localized)[wait]
+        assert p.min() >= p[0] - 1e-12, f"seed {seed}: p_localized fell from {p[0]:.3f} to {p.min():.3f} while waiting"

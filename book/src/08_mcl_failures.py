@@ -575,8 +575,11 @@ plt.show()
 # estimates. `localize.reliability` runs that same filter, `localize.discrete`,
 # over two states, *wrong* and *right*:
 #
-# * **prediction**: a right estimate stays right from one scan to the next
-#   with probability $1 - p_{\text{lose}}$ (0.99); a wrong one does not become
+# * **prediction**: a right estimate stays right from one update to the next
+#   with probability $1 - p_{\text{lose}}$ (0.99). Per update of the
+#   particle filter, not per scan: the command line updates only after the
+#   robot has moved (chapter 9), and a robot waiting at a door while its
+#   laser scans on does not get lost by waiting. A wrong one does not become
 #   right by itself — the particle filter finds the robot by moving its
 #   estimate somewhere else, and a new place starts a new hypothesis at even
 #   odds;
