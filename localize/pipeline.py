@@ -47,8 +47,8 @@ from .grid import OccupancyGrid
 from .motion import ReversibleOdometry
 from .settings import DEFAULTS, LEGACY_NAMES, RunSettings
 
-__all__ = ["RunResult", "localize_log", "make_sensor", "check_log_odometry", "check_log_max_range", "auto_particles", "resolve_particles",
-           "converged_at", "kld_sampling", "augmented_filter", "settings_with", "read_log_file", "read_map_file",
+__all__ = ["RunResult", "localize_log", "make_sensor", "check_log_odometry", "check_log_max_range", "auto_particles",
+           "resolve_particles", "converged_at", "kld_sampling", "augmented_filter", "settings_with", "read_log_file", "read_map_file",
            "read_inputs", "Inputs", "check_free_space", "map_summary", "AUTO_PARTICLES", "ODOMETRY_SIGN",
            "read_reference", "match_reference", "MapCheck", "check_map", "particles_for_area", "scanned_area"]
 
@@ -264,7 +264,13 @@ MAX_RANGE_SHARE = 0.01
 
 
 def _warn_user(message: str) -> None:
-    warnings.warn(message, UserWarning, stacklevel=4)   # at the caller of localize_log or smooth_log
+    warnings.warn(message, UserWarning, stacklevel=5)   # at the caller of localize_log or smooth_log
+
+
+def run_max_range(log, s: RunSettings):
+    """``check_log_max_range`` as a run does it: a Python warning, unless ``s.max_range`` keeps the stated range."""
+    keeps = s.max_range is not None and s.max_range <= log.max_range
+    return check_log_max_range(log, None if keeps else _warn_user)[0]
 
 
 def check_log_max_range(log, warn: Callable[[str], None] | None = None):
@@ -404,7 +410,7 @@ def localize_log(grid: OccupancyGrid, log, settings: RunSettings | None = None, 
     check_rng(rng)
     s = settings_with(settings, **changes)
     n_particles = resolve_particles(s.particles, grid)
-    log, _ = check_log_max_range(log, _warn_user if s.max_range is None or s.max_range > log.max_range else None)
+    log = run_max_range(log, s)
     log, sign_check = check_log_odometry(log, s.odometry_sign, min_range=s.min_range)
     if s.beams is not None and s.beams < log.n_beams:
         log = log.select_beams(count=s.beams)

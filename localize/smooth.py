@@ -82,7 +82,7 @@ from ._checks import check_count, check_nonnegative, check_positive
 from .evidence import scan_fit
 from .geometry import angle_diff, circular_mean, compose, relative
 from .grid import OccupancyGrid
-from .pipeline import RunResult, _warn_user, check_log_max_range, check_log_odometry, localize_log, settings_with
+from .pipeline import RunResult, check_log_odometry, localize_log, run_max_range, settings_with
 from .runloop import RunTrace, StateTrack, _intervals
 from .settings import RunSettings
 
@@ -674,7 +674,7 @@ def smooth_log(grid: OccupancyGrid, log, rng: np.random.Generator, *, settings: 
         progress.total = 2 * n
     # the odometry's signs are checked once, on the log as recorded (played backwards, every step of an
     # odometry without a sign reads as reversing); both passes then trust the corrected log
-    log, _ = check_log_max_range(log, _warn_user)
+    log = run_max_range(log, s)
     log, sign_check = check_log_odometry(log, s.odometry_sign, min_range=s.min_range)
     s = replace(s, odometry_sign="trust")
     fw = localize_log(grid, log, s, rng=rng, progress=progress, snapshot_every=snapshot_every)

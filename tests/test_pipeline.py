@@ -148,8 +148,9 @@ def test_a_few_stray_readings_above_the_maximum_do_not_change_the_log():
 def test_a_run_uses_the_readings_unless_max_range_keeps_the_stated_one(office_run):
     grid, log = office_run                                   # a 10 m laser
     short = dataclasses.replace(log, max_range=3.0)          # whose log says 3 m
-    with pytest.warns(UserWarning, match="states a maximum range of 3 m"):
+    with pytest.warns(UserWarning, match="states a maximum range of 3 m") as said:
         a = pipeline.localize_log(grid, short, RunSettings(particles=300, track=True), rng=np.random.default_rng(0))
+    assert len(said) == 1 and said[0].filename == __file__            # said once, where the run was asked for
     b = pipeline.localize_log(grid, dataclasses.replace(log, max_range=float(log.ranges.max())),
                               RunSettings(particles=300, track=True), rng=np.random.default_rng(0))
     assert _same(a, b)                                        # the run with the range the readings show
@@ -175,3 +176,13 @@ def test_reading_a_log_file_checks_its_maximum_range_before_min_range(tmp_path):
     assert got.max_range > 8.5
     short = np.asarray(io.read_log(path).ranges) < 0.2
     assert short.any() and np.all(got.ranges[short] == got.max_range)   # below min_range: the real no return
+
+
+def test_smoothing_checks_the_maximum_range_once_for_both_passes(office_run):
+    from localize.smooth import smooth_log
+
+    grid, log = office_run
+    short = dataclasses.replace(log, max_range=3.0)
+    with pytest.warns(UserWarning, match="states a maximum range of 3 m") as said:
+        smooth_log(grid, short, np.random.default_rng(0), settings=RunSettings(particles=300, track=True))
+    assert len(said) == 1 and said[0].filename == __file__
