@@ -263,6 +263,11 @@ MAX_RANGE_DISTINCT = 20
 MAX_RANGE_SHARE = 0.01
 
 
+def _measurements(distinct: int, share: float) -> bool:
+    """Whether readings above a stated maximum range are measurements rather than no-return codes."""
+    return distinct >= MAX_RANGE_DISTINCT and share >= MAX_RANGE_SHARE
+
+
 def _warn_user(message: str) -> None:
     warnings.warn(message, UserWarning, stacklevel=5)   # at the caller of localize_log or smooth_log
 
@@ -310,7 +315,7 @@ def check_log_max_range(log, warn: Callable[[str], None] | None = None):
     above = log.ranges[log.ranges > stated]
     distinct = int(np.unique(above).size)
     share = above.size / log.ranges.size
-    if distinct < MAX_RANGE_DISTINCT or share < MAX_RANGE_SHARE:
+    if not _measurements(distinct, share):
         return log, None
     reach = float(above.max())
     msg = (f"the log states a maximum range of {stated:g} m, but {share:.0%} of its readings lie above it "
@@ -536,6 +541,12 @@ def read_log_file(path: Path, format: str | None = None, *, scan_topic: str | No
         log = rosbag.read_rosbag(path, scan_topic=scan_topic, odom_topic=odom_topic, laser_pose=laser_pose)
         if log.skipped and warn is not None:
             warn(f"{path}: skipped " + "; ".join(f"{n} {k}" for k, n in log.skipped.items()))
+        over = log.meta.get("above_range_max")
+        if over and warn is not None and _measurements(over["distinct"], over["share"]):
+            warn(f"{path}: {over['share']:.0%} of the readings ({over['distinct']} distinct values, up to "
+                 f"{over['largest']:.3g} m) lie above the scans' range_max ({log.max_range:g} m): ROS and AMCL "
+                 "discard them, and so does this run; if the laser reaches further, its driver's range_max is "
+                 "set too short")
     else:
         if scan_topic or odom_topic:
             raise ValueError("--scan-topic and --odom-topic apply to ROS bags only")

@@ -397,3 +397,32 @@ def test_evo_reads_the_tum_output_and_agrees_on_the_ape(carmen_run):
     assert len(ape.error) == N_SCANS
     assert np.allclose(ape.error, ours, atol=1e-4)
     assert ape.get_statistic(metrics.StatisticsType.rmse) == pytest.approx(np.sqrt(np.mean(ours**2)), abs=1e-4)
+
+
+def test_many_readings_above_range_max_are_discarded_as_ros_says_and_warned_about(tmp_path):
+    """A driver whose range_max (10 m) is shorter than the laser's reach: ROS and AMCL discard the readings above
+    it, and so does the reader; the run says how many there were. One stray value above it says nothing."""
+    from localize import pipeline
+
+    rng = np.random.default_rng(3)
+    msgs = []
+    for k in range(6):
+        t = 1.0 + 0.5 * k
+        msgs.append(("/odom", ODOM_T, t - 0.01, _odom(t - 0.01, 0.1 * k, 0.0, 0.0)))
+        msgs.append(("/odom", ODOM_T, t + 0.2, _odom(t + 0.2, 0.1 * k + 0.04, 0.0, 0.0)))
+        msgs.append(("/scan", SCAN_T, t, _scan(t, rng.uniform(0.5, 25.0, ANGLES.size), frame="base_link")))
+    bag = _write(tmp_path / "far.bag", msgs)
+    said = []
+    log = pipeline.read_log_file(bag, warn=said.append)
+    over = log.meta["above_range_max"]
+    assert over["readings"] == over["distinct"] > 200 and 10.0 < over["largest"] <= 25.0
+    assert log.max_range == 10.0 and np.all(log.ranges <= 10.0)            # discarded: "no return"
+    assert len(said) == 1 and said[0].startswith(f"{bag}: {over['share']:.0%} of the readings ({over['distinct']} "
+                                                 "distinct values, up to ")
+    assert "range_max (10 m)" in said[0]
+    one = [("/odom", ODOM_T, 0.9, _odom(0.9, 0.0, 0.0, 0.0)), ("/odom", ODOM_T, 1.9, _odom(1.9, 1.0, 0.0, 0.0)),
+           ("/scan", SCAN_T, 1.15, _scan(1.15, np.r_[12.0, np.full(ANGLES.size - 1, 3.0)], frame="base_link"))]
+    said.clear()
+    assert pipeline.read_log_file(_write(tmp_path / "one.bag", one), warn=said.append).meta["above_range_max"] == \
+        {"readings": 1, "distinct": 1, "largest": 12.0, "share": 1 / ANGLES.size}
+    assert said == []

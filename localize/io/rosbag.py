@@ -500,8 +500,9 @@ def _laser_mounting(m: _Messages, meta: dict, laser_pose, parent: str, base: str
     return off, flip
 
 
-def _scan_arrays(m: _Messages) -> tuple[NDArray, NDArray, NDArray, float, float]:
-    """Beam angles, ranges (no return = range_max), the invalid-reading mask, range_max and range_min."""
+def _scan_arrays(m: _Messages) -> tuple[NDArray, NDArray, NDArray, float, float, NDArray]:
+    """Beam angles, ranges (no return = range_max), the invalid-reading mask, range_max, range_min, and the
+    finite readings above range_max (NaN elsewhere: ROS discards them, but a run warns when they are many)."""
     n_beams, a_min, a_inc, r_min, r_max = m.layout
     deg = np.pi / 180.0
     a0 = float(_decimal(np.float32([a_min]), scale=deg)[0])
@@ -511,8 +512,9 @@ def _scan_arrays(m: _Messages) -> tuple[NDArray, NDArray, NDArray, float, float]
     mn = float(_decimal(np.float32([r_min]))[0])
     ranges = _decimal(np.vstack(m.ranges))
     bad = ~np.isfinite(ranges) | (ranges < mn) | (ranges > mr)
+    above = np.where(np.isfinite(ranges) & (ranges > mr), ranges, np.nan)
     ranges[bad] = mr
-    return angles, ranges, bad, mr, mn
+    return angles, ranges, bad, mr, mn, above
 
 
 def _interpolate(o_st: NDArray, o_pose: NDArray, ts: NDArray, meta: dict) -> NDArray:
@@ -560,7 +562,7 @@ def _read(root: Path, reader, scan_topic, odom_topic, laser_pose, odom_frame) ->
     o_pose[:, 2] = wrap_angle(o_pose[:, 2])
     meta["base_frame"], meta["odom_frame"] = base, parent
     off, flip = _laser_mounting(m, meta, laser_pose, parent, base, frame)
-    angles, ranges, bad, mr, mn = _scan_arrays(m)
+    angles, ranges, bad, mr, mn, above = _scan_arrays(m)
     if flip:
         angles, ranges = -angles[::-1], ranges[:, ::-1]
     inside = (stamps >= o_st[0]) & (stamps <= o_st[-1])
@@ -570,6 +572,10 @@ def _read(root: Path, reader, scan_topic, odom_topic, laser_pose, odom_frame) ->
                                       f"({stamps[0] / _NS_PER_S:.3f} .. {stamps[-1] / _NS_PER_S:.3f} s) falls within the "
                                       f"odometry's time span ({o_st[0] / _NS_PER_S:.3f} .. {o_st[-1] / _NS_PER_S:.3f} s)")
     meta["invalid_readings"] = int(bad[inside].sum())  # NaN, inf, outside [range_min, range_max]: no return
+    above = above[inside][np.isfinite(above[inside])]
+    if above.size:                                      # discarded, as ROS specifies; counted for the run's warning
+        meta["above_range_max"] = {"readings": int(above.size), "distinct": int(np.unique(above).size),
+                                   "largest": float(above.max()), "share": float(above.size / ranges[inside].size)}
     ts = stamps[inside]
     odom = _interpolate(o_st, o_pose, ts, meta)
     skipped = {"scans outside the odometry's time span": dropped} if dropped else {}
