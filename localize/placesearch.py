@@ -30,14 +30,15 @@ from __future__ import annotations
 from typing import Any, Callable
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ._checks import check_count, check_rng
 from .geometry import compose
 from .grid import OccupancyGrid
 from .sensors import LikelihoodField
 
-__all__ = ["COARSE_SIGMA", "COARSE_HEADINGS", "coarse_model", "lattice", "best_places", "climb", "climb_on", "stencil", "scores"]
+__all__ = ["COARSE_SIGMA", "COARSE_HEADINGS", "coarse_model", "lattice", "best_places", "climb", "climb_on", "stencil",
+           "scores", "distinct"]
 
 #: Standard deviation (m) of the blurred likelihood field the search scores with: half the spacing of its
 #: lattice of positions (1 m), and about how far a 10-degree heading step moves an end point 5 m away (0.44 m).
@@ -136,9 +137,16 @@ def stencil(xy: float, heading: float, levels: int) -> NDArray[np.float64]:
     return np.vstack([steps, -steps])
 
 
-def _distinct(cand: NDArray, order: NDArray, n: int, spacing: float) -> NDArray:
-    """The first ``n`` candidates in ``order`` that are distinct places: no two within ``spacing`` metres of
-    each other with headings within 45 degrees (the best few lattice poses are mostly one place)."""
+def distinct(cand: NDArray, order: ArrayLike, n: int, spacing: float, heading: float = np.pi / 4) -> list[int]:
+    """Indices of the first ``n`` candidates in ``order`` that are distinct places: none within ``spacing``
+    metres of one kept before it with a heading within ``heading`` radians (``np.inf``: any heading).
+
+    Examples
+    --------
+    >>> cand = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.1], [0.3, 0.0, 3.0], [2.0, 0.0, 0.0]])
+    >>> distinct(cand, [0, 1, 2, 3], 4, 1.0), distinct(cand, [0, 1, 2, 3], 4, 1.0, heading=np.inf)
+    ([0, 2, 3], [0, 3])
+    """
     kept: list[int] = []
     for i in order:
         if len(kept) == n:
@@ -146,10 +154,10 @@ def _distinct(cand: NDArray, order: NDArray, n: int, spacing: float) -> NDArray:
         if kept:
             k = cand[kept]
             dth = np.abs((k[:, 2] - cand[i, 2] + np.pi) % (2.0 * np.pi) - np.pi)
-            if np.any((np.hypot(*(k[:, :2] - cand[i, :2]).T) < spacing) & (dth < np.pi / 4)):
+            if np.any((np.hypot(*(k[:, :2] - cand[i, :2]).T) < spacing) & (dth < heading)):
                 continue
         kept.append(int(i))
-    return cand[kept]
+    return kept
 
 
 def best_places(grid: OccupancyGrid, sensor: Any, z: tuple, rng: np.random.Generator, *,
@@ -195,7 +203,7 @@ def best_places(grid: OccupancyGrid, sensor: Any, z: tuple, rng: np.random.Gener
     if len(cand) == 0:
         return np.empty((0, 3)), np.empty(0)
     ll = scores(coarse, cand, z)
-    best = _distinct(cand, np.argsort(ll)[::-1], n_best, spacing)
+    best = cand[distinct(cand, np.argsort(ll)[::-1], n_best, spacing)]      # the best few lattice poses: one place
     places, p_ll = climb(sensor, best, z, stencil(0.5 * spacing, 0.5 * step, 6))
     ok = allowed(places)
     places, p_ll = places[ok], p_ll[ok]

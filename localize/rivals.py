@@ -58,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 from ._checks import check_count, check_positive
 from .geometry import compose, inverse, relative
 from .grid import OccupancyGrid
-from .placesearch import best_places, climb_on, coarse_model, scores, stencil
+from .placesearch import best_places, climb_on, coarse_model, distinct, scores, stencil
 from .resample import logsumexp
 
 __all__ = ["RivalBank"]
@@ -208,13 +208,7 @@ class RivalBank:
         ok = np.isfinite(L) & (np.hypot(*(hyps[:, :2] - pose[:2]).T) >= self.radius)
         G = compose(hyps, inverse(pose)[None])
         order = [i for i in np.argsort(-L) if ok[i]]
-        kept: list[int] = []
-        for i in order:                                  # distinct places, the best first
-            if len(kept) == self.n_rivals:
-                break
-            if kept and np.min(np.hypot(*(hyps[kept, :2] - hyps[i, :2]).T)) < self.radius:
-                continue
-            kept.append(int(i))
+        kept = distinct(hyps, order, self.n_rivals, self.radius, heading=np.inf)   # distinct places, the best first
         self.G, self.L = G[kept], L[kept]
 
     def winner(self) -> int | None:
