@@ -500,9 +500,10 @@ def _laser_mounting(m: _Messages, meta: dict, laser_pose, parent: str, base: str
     return off, flip
 
 
-def _scan_arrays(m: _Messages) -> tuple[NDArray, NDArray, NDArray, float, float, NDArray]:
+def _scan_arrays(m: _Messages) -> tuple[NDArray, NDArray, NDArray, float, float, tuple[NDArray, NDArray]]:
     """Beam angles, ranges (no return = range_max), the invalid-reading mask, range_max, range_min, and the
-    finite readings above range_max (NaN elsewhere: ROS discards them, but a run warns when they are many)."""
+    finite readings above range_max with the scan of each, ``(scans, readings)`` (ROS discards them; a run
+    warns when they are many)."""
     n_beams, a_min, a_inc, r_min, r_max = m.layout
     deg = np.pi / 180.0
     a0 = float(_decimal(np.float32([a_min]), scale=deg)[0])
@@ -512,7 +513,8 @@ def _scan_arrays(m: _Messages) -> tuple[NDArray, NDArray, NDArray, float, float,
     mn = float(_decimal(np.float32([r_min]))[0])
     ranges = _decimal(np.vstack(m.ranges))
     bad = ~np.isfinite(ranges) | (ranges < mn) | (ranges > mr)
-    above = np.where(np.isfinite(ranges) & (ranges > mr), ranges, np.nan)
+    rows, cols = np.nonzero(np.isfinite(ranges) & (ranges > mr))
+    above = (rows, ranges[rows, cols])
     ranges[bad] = mr
     return angles, ranges, bad, mr, mn, above
 
@@ -572,7 +574,7 @@ def _read(root: Path, reader, scan_topic, odom_topic, laser_pose, odom_frame) ->
                                       f"({stamps[0] / _NS_PER_S:.3f} .. {stamps[-1] / _NS_PER_S:.3f} s) falls within the "
                                       f"odometry's time span ({o_st[0] / _NS_PER_S:.3f} .. {o_st[-1] / _NS_PER_S:.3f} s)")
     meta["invalid_readings"] = int(bad[inside].sum())  # NaN, inf, outside [range_min, range_max]: no return
-    above = above[inside][np.isfinite(above[inside])]
+    above = above[1][inside[above[0]]]
     if above.size:                                      # discarded, as ROS specifies; counted for the run's warning
         meta["above_range_max"] = {"readings": int(above.size), "distinct": int(np.unique(above).size),
                                    "largest": float(above.max()), "share": float(above.size / ranges[inside].size)}
