@@ -512,8 +512,9 @@ def _scan_arrays(m: _Messages) -> tuple[NDArray, NDArray, NDArray, float, float,
     mr = float(_decimal(np.float32([r_max]))[0])
     mn = float(_decimal(np.float32([r_min]))[0])
     ranges = _decimal(np.vstack(m.ranges))
-    bad = ~np.isfinite(ranges) | (ranges < mn) | (ranges > mr)
-    rows, cols = np.nonzero(np.isfinite(ranges) & (ranges > mr))
+    finite, over = np.isfinite(ranges), ranges > mr
+    bad = ~finite | (ranges < mn) | over
+    rows, cols = np.nonzero(finite & over)
     above = (rows, ranges[rows, cols])
     ranges[bad] = mr
     return angles, ranges, bad, mr, mn, above
@@ -574,10 +575,11 @@ def _read(root: Path, reader, scan_topic, odom_topic, laser_pose, odom_frame) ->
                                       f"({stamps[0] / _NS_PER_S:.3f} .. {stamps[-1] / _NS_PER_S:.3f} s) falls within the "
                                       f"odometry's time span ({o_st[0] / _NS_PER_S:.3f} .. {o_st[-1] / _NS_PER_S:.3f} s)")
     meta["invalid_readings"] = int(bad[inside].sum())  # NaN, inf, outside [range_min, range_max]: no return
-    above = above[1][inside[above[0]]]
-    if above.size:                                      # discarded, as ROS specifies; counted for the run's warning
-        meta["above_range_max"] = {"readings": int(above.size), "distinct": int(np.unique(above).size),
-                                   "largest": float(above.max()), "share": float(above.size / ranges[inside].size)}
+    scan_of, over = above
+    over = over[inside[scan_of]]                        # those of the scans kept
+    if over.size:                                       # discarded, as ROS specifies; counted for the run's warning
+        meta["above_range_max"] = {"readings": int(over.size), "distinct": int(np.unique(over).size),
+                                   "largest": float(over.max()), "share": float(over.size / ranges[inside].size)}
     ts = stamps[inside]
     odom = _interpolate(o_st, o_pose, ts, meta)
     skipped = {"scans outside the odometry's time span": dropped} if dropped else {}
