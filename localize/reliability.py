@@ -38,9 +38,11 @@ keeps, which also moves the cloud to a rival that wins); *localized* from
 
 **Limits, measured** (``benchmarks/RESULTS.md``, ``bench_global_state_probability``,
 ``tests/test_state_scenarios.py`` and chapter 8). The bank holds a handful of
-look-alikes, not a continuum: in a long featureless corridor it moves the
-estimate to a stretch that fit one scan better than the four it held, and the
-state says localized there, far off (a strict xfail). In ``localize demo``'s
+look-alikes, not a continuum: in a long featureless corridor ``p_localized``
+reaches 0.55-0.73 far off, though the state never says localized there (a
+strict xfail; with the simulator's default laser, whose beams that hit nothing
+read a few centimetres short of the range and fit the corridor's far end, it
+said localized 21 m off: ``BeamModel``'s ``no_return``). In ``localize demo``'s
 office (a room nearly symmetric under a half turn, whose map shows a cupboard
 that is not there) the mirror image fits the scans better than the true place
 over stretches of tens of scans, and the state says localized there until

@@ -301,6 +301,11 @@ class BeamModel:
         800 x 800 map).
     caster : RayCaster, optional
         Share a caster (and its table) between models.
+    no_return : bool
+        How :meth:`sample_expected` (a simulated laser) draws the hit part of a beam whose ray hits nothing
+        within range: False (default) as PR's sampler does, from the normal about ``max_range`` truncated
+        to the range, a reading a few ``sigma_hit`` short of it; True: ``max_range``, the "no return" of a
+        real scanner (see there). The likelihoods do not depend on it.
 
     Examples
     --------
@@ -313,8 +318,9 @@ class BeamModel:
                  z_max: float = 0.05, z_rand: float = 0.05, sigma_hit: float = 0.2, lambda_short: float = 0.5,
                  *, sensor_offset: ArrayLike = (0.0, 0.0, 0.0), max_beams: int | None = None,
                  temper: float = 1.0, method: str = "compact", n_bins: int | None = None,
-                 caster: RayCaster | None = None) -> None:
+                 caster: RayCaster | None = None, no_return: bool = False) -> None:
         self.grid = None if grid is None else check_grid(grid)
+        self.no_return = bool(no_return)
         self.max_range = check_max_range(max_range)
         w = _weights(("z_hit", "z_short", "z_max", "z_rand"), (z_hit, z_short, z_max, z_rand))
         self.z_hit, self.z_short, self.z_max, self.z_rand = (float(v) for v in w)
@@ -533,12 +539,26 @@ class BeamModel:
         draws from it by inverting its CDF: the truncated normal, the
         truncated exponential, ``max_range``, or uniform.
 
+        A beam whose ray hits nothing within range (expected ``max_range``)
+        draws its hit part from the normal about ``max_range`` truncated to
+        the range, as PR's sampler does: a reading a few ``sigma_hit`` short
+        of it, an end point in mid-air that no laser produces and that fits
+        any wall just inside the range (a corridor's far end: ``localize
+        run`` then localized a featureless corridor, ``tests/test_state_scenarios.py``).
+        With ``no_return=True`` it reads ``max_range``, the "no return" of a
+        real scanner; its short and random parts are drawn as for any beam,
+        from the same random numbers.
+
         Examples
         --------
         >>> m = BeamModel(None, 10.0)
         >>> z = m.sample_expected(np.full(20000, 4.0), np.random.default_rng(0))
         >>> round(float(np.mean(z == 10.0)), 2), bool(z.min() >= 0)
         (0.05, True)
+        >>> far = np.full(20000, 10.0)                # rays that hit nothing: no return from the hit part too
+        >>> round(float(np.mean(BeamModel(None, 10.0, no_return=True).sample_expected(far, np.random.default_rng(0))
+        ...                     == 10.0)), 2)
+        0.85
         """
         rng = check_rng(rng)
         zs = np.clip(np.asarray(expected, dtype=float), self.z_floor, self.max_range)
@@ -549,6 +569,8 @@ class BeamModel:
         hit = zs + sig * _ndtri(np.clip(lo + u * (hi - lo), _TINY_P, _BELOW_ONE))
         short = -np.log1p(u * np.expm1(-lam * zs)) / lam
         rand = u * zmax
+        if self.no_return:
+            hit = np.where(zs >= zmax, zmax, hit)      # a ray that hits nothing returns nothing
         z = np.choose(k, [hit, short, np.full(zs.shape, zmax), rand])
         return np.clip(z, 0.0, zmax)
 

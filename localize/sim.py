@@ -648,7 +648,12 @@ def range_run(
         waypoint after each kidnapping.)
     scan_noise : dict, optional
         Keyword arguments of :class:`localize.sensors.BeamModel` for the
-        simulated laser (default :data:`DEFAULT_SCAN_NOISE`).
+        simulated laser (default :data:`DEFAULT_SCAN_NOISE`). A beam with
+        nothing within ``max_range`` reads ``max_range`` ("no return", as a
+        real scanner reports it; ``no_return=True`` of the model), unless
+        ``scan_noise`` says ``no_return=False``: PR's sampler, whose hit part
+        then reads a few ``sigma_hit`` short of the range, an end point in
+        mid-air.
     sensor : "beam", "ideal" or object with ``sample(poses, angles, rng)``
         How scans are made: ``"beam"`` (default) samples
         :class:`localize.sensors.BeamModel` built on the true world with
@@ -727,7 +732,8 @@ def range_run(
     if ang.size:
         if isinstance(sensor, str):
             if sensor == "beam":
-                model = _beam_model(world, max_range, offset, dict(DEFAULT_SCAN_NOISE, **(scan_noise or {})))
+                model = _beam_model(world, max_range, offset,
+                                    {**DEFAULT_SCAN_NOISE, "no_return": True, **(scan_noise or {})})
             elif sensor == "ideal":
                 model = _IdealSensor(world, max_range, offset)
             else:

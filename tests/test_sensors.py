@@ -111,6 +111,35 @@ def test_sample_scans_from_poses(beam, grid):
     np.testing.assert_array_equal(z, z2)
 
 
+def test_a_beam_with_nothing_in_range_reads_no_return_not_a_hit_short_of_it(grid):
+    """A ray that hits nothing reads max_range from the hit part (a real laser's "no return"), never an end point
+    a few sigma_hit short of it; short and random readings, and every beam that hits something, are drawn as
+    before (the same random stream)."""
+    m = BeamModel(grid, 3.0, z_hit=0.8, z_short=0.1, z_max=0.05, z_rand=0.05, sigma_hit=0.1, method="exact",
+                  no_return=True)
+    poses = grid.sample_free(200, np.random.default_rng(1))
+    angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)
+    expected = m.expected(poses, angles)
+    far = expected >= m.max_range
+    assert 0.2 < far.mean() < 0.9                                   # both kinds of beam occur
+    z = m.sample_expected(expected, np.random.default_rng(2))
+    n = int(far.sum())
+    share = np.mean(z[far] == m.max_range)                          # hit + max parts: 0.85
+    assert abs(share - 0.85) < 5 * math.sqrt(0.85 * 0.15 / n)
+    near_max = far & (z > m.max_range - 5 * m.sigma_hit) & (z < m.max_range)
+    # only the random part reaches there (5 sigma of 3 m: 1/6 of its 5%) and the short part, far less
+    assert near_max.sum() < 5 * (0.05 / 6 + 0.02) * n
+    moved = np.where(far, m.max_range - 1.0, expected)              # the far beams expected elsewhere ...
+    z2 = m.sample_expected(moved, np.random.default_rng(2))
+    np.testing.assert_array_equal(z[~far], z2[~far])                # ... change no other beam's reading
+    plain = BeamModel(grid, 3.0, z_hit=0.8, z_short=0.1, z_max=0.05, z_rand=0.05, sigma_hit=0.1, method="exact")
+    zp = plain.sample_expected(expected, np.random.default_rng(2))  # PR's sampler: the hit part short of the range
+    assert np.mean(zp[far] == m.max_range) < 0.1 < np.mean((zp[far] > m.max_range - 0.5) & (zp[far] < m.max_range))
+    np.testing.assert_array_equal(zp[~far], z[~far])
+    ll = [b.log_likelihood(poses[:5], zp[0], angles) for b in (m, plain)]
+    np.testing.assert_array_equal(*ll)                              # the likelihoods do not depend on it
+
+
 # --------------------------------------------------------- pose ranking
 def _displaced(true, rng, k=12):
     d = np.column_stack([rng.choice([-1, 1], k) * rng.uniform(0.25, 0.6, k),

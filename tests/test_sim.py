@@ -154,6 +154,23 @@ def test_beam_model_scans_have_failures(office):
     assert np.mean(close[hit]) > 0.75                          # but most beams hit what is there
 
 
+@pytest.mark.skipif(not HAVE_SENSORS, reason="localize.sensors not written yet")
+def test_a_beam_with_nothing_in_range_reads_no_return(office):
+    """Where no wall lies within range, the simulated laser says so (max_range) from its hit part, as a real
+    scanner does; with no_return=False (PR's sampler) the hit part reads a few centimetres short of the range."""
+    runs = [sim.range_run(office, np.random.default_rng(6), n_steps=40, max_range=5.0, scan_noise=noise)
+            for noise in (None, {"no_return": False})]
+    exact = cast(runs[0].world, runs[0].sensor_poses, runs[0].angles, runs[0].max_range, method="exact")
+    far = exact >= runs[0].max_range
+    n = int(far.sum())
+    assert n > 500
+    real, plain = (r.ranges[far] for r in runs)
+    p = sim.DEFAULT_SCAN_NOISE["z_hit"] + sim.DEFAULT_SCAN_NOISE["z_max"]
+    assert abs(np.mean(real == 5.0) - p) < 5 * np.sqrt(p * (1 - p) / n)
+    assert np.mean(plain == 5.0) < 0.1 < np.mean((plain > 4.8) & (plain < 5.0))
+    np.testing.assert_array_equal(runs[0].ranges[~far], runs[1].ranges[~far])   # every other beam as before
+
+
 def test_bad_arguments(office):
     rng = np.random.default_rng(0)
     with pytest.raises(TypeError, match="rng"):

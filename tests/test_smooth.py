@@ -222,14 +222,17 @@ def test_smoothing_localizes_the_start_that_the_forward_pass_searched(seed):
     assert summ["share_agree_where_both_localized"] > 0.9
 
 
-@pytest.mark.parametrize("seed", [4, 5])
+@pytest.mark.parametrize("seed", [2, 4])
 def test_smoothing_fixes_a_forward_pass_localized_in_the_wrong_place(seed):
-    """Seeds 4 and 5: with these settings the forward pass locks onto a wrong place of the office and says
+    """Seeds 2 and 4: with these settings the forward pass locks onto a wrong place of the office and says
     "localized"; the backward pass is right. The scan fit gives the stretch to the backward pass, and no smoothed
     scan claims a wrong place. In seed 4 the forward pass, lost, re-localizes at a look-alike place for the last
     scans, which the backward pass (its own start) has not localized: the backward estimate fits them better, so
-    the forward pass is overruled there. (Measured with the defaults before --odometry-sign and --occupied-penalty:) Of seeds 0-27 the forward pass failed so in 2, 4, 5 and 22; in 2 both passes
-    agree on the wrong place, which smoothing cannot fix, and in 22 some smoothed scans keep a wrong claim."""
+    the forward pass is overruled there. Measured with the simulated laser that reports no return where nothing
+    is in range (stop 52, this test's run over seeds 0-27): the forward pass calls a wrong place localized in 1,
+    2, 4, 5, 21, 22 and 26. Smoothing fixes 2 and 4; in 1, 5 and 26 both passes agree on the wrong place at some
+    scans, which smoothing cannot fix, and in 21 and 22 some smoothed scans keep a wrong claim (21: 32 such scans
+    against the forward pass's 6)."""
     log, truth = _office_log(seed)
     res = smooth.smooth_log(office(), log, rng=np.random.default_rng(seed),
                             **_cli_kwargs("--particles", "20000", "--max-range", "8"))

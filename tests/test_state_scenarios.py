@@ -233,12 +233,12 @@ def test_kidnapping_is_noticed_within_three_scans():
                                              f"{err[90:90 + KIDNAP_NOTICED].round(1).tolist()} m off"
 
 
-@pytest.mark.xfail(strict=True, reason="issue 43, open: 'localized' 21-22 m off at scans 56-59 (seed 0): the rival "
-                   "bank holds four stretches of the corridor (share 0.11 until then), one gains 4 nats at a scan and "
-                   "takes the estimate's place, and near where a corridor end comes into the laser's range the probe's "
-                   "poses 1 m ahead and behind differ; four rivals are not the corridor's continuum of look-alikes")
 def test_featureless_corridor_is_never_localized():
-    """A robot in a long, featureless corridor: its scans cannot tell where along it it is (3 seeds)."""
+    """A robot in a long, featureless corridor: its scans cannot tell where along it it is (3 seeds).
+
+    Until stop 52 the simulated laser read a beam that hits nothing as a hit a few ``sigma_hit`` short of
+    the 12 m range, end points in mid-air that fit a corridor end 12 m away: the state said localized there,
+    21 m off (seed 0). A real laser reports no return there, and so does the simulated one now."""
     sc = S.corridor()
     for seed in (0, 1, 2):
         tr = S.run(sc, seed, state=STATE)
@@ -246,14 +246,20 @@ def test_featureless_corridor_is_never_localized():
         err = S.position_errors(sc, tr)
         assert not np.any(state == "localized"), f"seed {seed}: 'localized' at " + \
             _show(np.flatnonzero(state == "localized"), err, state)
-        p = getattr(tr, "p_localized", None)
-        if p is not None:         # 1 m of a 16 m stretch that fits as well: the robot is not known to be there
-            assert np.max(p) <= 0.5, f"seed {seed}: p_localized reaches {np.max(p):.2f} in the corridor"
+
+
+@pytest.mark.xfail(strict=True, reason="issue 43, open: p_localized reaches 0.73 (seed 0, scan 37, 23 m off), 0.55 "
+                   "and 0.59 (seeds 1, 2) while the state says searching: the rival bank holds a handful of stretches "
+                   "of the corridor, not its continuum of look-alikes")
+def test_featureless_corridor_probability_stays_below_a_half():
+    """1 m of a 16 m stretch that fits as well: the robot is not known to be there."""
+    sc = S.corridor()
+    for seed in (0, 1, 2):
+        p = np.asarray(S.run(sc, seed, state=STATE).p_localized)
+        assert np.max(p) <= 0.5, f"seed {seed}: p_localized reaches {np.max(p):.2f} in the corridor"
 
 
 # ============================================================================ the issue's four new ones
-@pytest.mark.xfail(strict=True, reason="issue 43, open: the state is never 'localized' while off (both seeds), "
-                   "but p_localized is 0.73 at one scan 1.51 m off (seed 0, scan 107) while a restart settles")
 def test_missing_odometry_in_a_turn_is_not_called_localized():
     sc = S.missing_odometry_in_turn()
     for seed in SEEDS:

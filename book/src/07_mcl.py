@@ -493,9 +493,9 @@ mcl_player()
 # draw of the whole run, and in this run the robot starts in a room that looks
 # much like another one for its first 40 steps. Over ten seeds (measured with
 # `localize.widgets.mcl.simulate(n_particles=N, seed=s)`, s = 0..9) the filter
-# ends within 0.5 m in 5 of 10 runs with 5000 particles and in 5 of 10 with
-# 15 000 — the same rate, and with ten runs a difference of one or two would
-# mean nothing either. Judge a setting by its success *rate* (the table above),
+# ends within 0.5 m in 6 of 10 runs with 5000 particles and in 5 of 10 with
+# 15 000 — about the same rate: with ten runs a difference of one or two
+# means nothing. Judge a setting by its success *rate* (the table above),
 # never by one run.
 #
 # Two remedies make the look-alike room less of a coin flip. The first is a

