@@ -128,7 +128,8 @@ plt.show()
 # runs, within four steps), and resampling then removes the other mode's
 # particles for good. Not in every run: in the first one below the scans
 # favour neither mode strongly, and the mirror image keeps between a tenth and a
-# third of the weight for all 40 steps, the bimodal belief the hall deserves. (Resampling alone would also end the tie, by a
+# third of the weight for all 40 steps, the bimodal belief the hall deserves.
+# (Resampling alone would also end the tie, by a
 # random walk of the split that population geneticists call genetic drift;
 # here the scans decide long before drift could, which is why resampling less
 # often changes nothing: exercise 3.) After that the filter is sure of one
