@@ -218,10 +218,12 @@ def test_what_a_submission_breaks_costs_only_that(name, edge_grades):
 
 
 def test_the_solutions_are_not_importable_in_the_sandbox(tmp_path):
-    """Even without the audit hook's refusal, teacher/ is not on the grading process's path."""
+    """Even without the audit hook's refusal, teacher/ is not on the grading process's path. The environment's own
+    folders may lie inside the checkout (the README's `.venv`): they are the only part of it on the path."""
     nb = filled([], "import importlib.util\nassert importlib.util.find_spec('teacher') is None\n"
                     "assert importlib.util.find_spec('tools') is None\nimport sys\n"
-                    f"assert not [p for p in sys.path if p.startswith({str(ROOT)!r})], sys.path")
+                    f"assert not [p for p in sys.path if p.startswith({str(ROOT)!r}) and not p.startswith(sys.prefix)], "
+                    "sys.path")
     nbformat.write(nb, tmp_path / "s.ipynb")
     grade = grade_submission(tmp_path / "s.ipynb")
     assert grade.notes == [] and grade.total == 32
