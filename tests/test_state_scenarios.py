@@ -28,6 +28,7 @@ claims too much) and asserts that each check fails on them.
 
 from __future__ import annotations
 
+from functools import cache
 from types import SimpleNamespace
 
 import numpy as np
@@ -233,15 +234,21 @@ def test_kidnapping_is_noticed_within_three_scans():
                                              f"{err[90:90 + KIDNAP_NOTICED].round(1).tolist()} m off"
 
 
+@cache
+def _corridor_run(seed: int):
+    """The corridor scenario localized with ``seed`` (once: both corridor tests read it)."""
+    sc = S.corridor()
+    return sc, S.run(sc, seed, state=STATE)
+
+
 def test_featureless_corridor_is_never_localized():
     """A robot in a long, featureless corridor: its scans cannot tell where along it it is (3 seeds).
 
     Until stop 52 the simulated laser read a beam that hits nothing as a hit a few ``sigma_hit`` short of
     the 12 m range, end points in mid-air that fit a corridor end 12 m away: the state said localized there,
     21 m off (seed 0). A real laser reports no return there, and so does the simulated one now."""
-    sc = S.corridor()
     for seed in (0, 1, 2):
-        tr = S.run(sc, seed, state=STATE)
+        sc, tr = _corridor_run(seed)
         state = _states(tr)
         err = S.position_errors(sc, tr)
         assert not np.any(state == "localized"), f"seed {seed}: 'localized' at " + \
@@ -253,9 +260,8 @@ def test_featureless_corridor_is_never_localized():
                    "of the corridor, not its continuum of look-alikes")
 def test_featureless_corridor_probability_stays_below_a_half():
     """1 m of a 16 m stretch that fits as well: the robot is not known to be there."""
-    sc = S.corridor()
     for seed in (0, 1, 2):
-        p = np.asarray(S.run(sc, seed, state=STATE).p_localized)
+        p = np.asarray(_corridor_run(seed)[1].p_localized)
         assert np.max(p) <= 0.5, f"seed {seed}: p_localized reaches {np.max(p):.2f} in the corridor"
 
 
