@@ -220,19 +220,26 @@ class RunOutput:
             return False
 
     def close(self) -> None:
-        """Remove the staging folder, release the lock, remove folders made for a run that wrote nothing."""
-        if self.stage is not None and self.stage.exists():
-            shutil.rmtree(self.stage, ignore_errors=True)
-        self.stage = None
-        self._unwatch_sigint()
-        self._release()
-        if not self._committed:
-            for d in reversed(self._created):  # innermost first; only while empty
-                try:
-                    d.rmdir()
-                except OSError:
-                    break
-        self._created = []
+        """Remove the staging folder, release the lock, remove folders made for a run that wrote nothing.
+
+        Ctrl-C is held back meanwhile (POSIX), as in :meth:`commit`: cut short, it would leave the lock file or
+        the folders behind."""
+        blocked = _block_sigint()
+        try:
+            if self.stage is not None and self.stage.exists():
+                shutil.rmtree(self.stage, ignore_errors=True)
+            self.stage = None
+            self._unwatch_sigint()
+            self._release()
+            if not self._committed:
+                for d in reversed(self._created):  # innermost first; only while empty
+                    try:
+                        d.rmdir()
+                    except OSError:
+                        break
+            self._created = []
+        finally:
+            _unblock_sigint(blocked)
 
     def _release(self) -> None:
         if self._lock is not None:
