@@ -28,7 +28,7 @@ for the scans at which the map is wrong (a moved cabinet), so that one poor
 fit never condemns a right estimate.
 
 :class:`ReliabilityState` is the run driver's state policy built on it
-(``localize run --state probability``; ``run_filter(..., state="probability")``):
+(the default of ``localize run``, ``--state probability``; ``run_filter(..., state="probability")``):
 ``p_localized`` is the geometric mean of the belief and the particle filter's
 own mass near its estimate (the smallest of the weight within the radius, a
 five-pose probe that a featureless corridor cannot pass, and the estimate's
@@ -46,8 +46,9 @@ said localized 21 m off: ``BeamModel``'s ``no_return``). In ``localize demo``'s
 office (a room nearly symmetric under a half turn, whose map shows a cupboard
 that is not there) the mirror image fits the scans better than the true place
 over stretches of tens of scans, and the state says localized there until
-the scans tell them apart. These are why the threshold state remains the
-default.
+the scans tell them apart. The threshold state (``--state thresholds``),
+the command line's default until stop 53, does no better on any of these
+(``bench_global_experiments_stop53``).
 
 This follows the reliability estimation of Akai et al. (*Reliable Monte Carlo
 localization for mobile robots*, 2023; als_ros), where a classifier's output
@@ -69,6 +70,8 @@ Examples
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -85,7 +88,7 @@ from .resample import logsumexp
 from .rivals import RivalBank
 from .sensors import sensor_poses
 
-__all__ = ["EvidenceModel", "calibrate", "calibration_fits", "simulate_scans", "look_alikes", "converged_error", "error_levels",
+__all__ = ["EvidenceModel", "calibrate", "calibrate_once", "content_key", "calibration_fits", "simulate_scans", "look_alikes", "converged_error", "error_levels",
            "LocalizedBelief",
            "ReliabilityState", "reliability_table", "LOCALIZED_AT", "LOST_BELOW"]
 
@@ -373,6 +376,86 @@ def calibrate(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.rando
                          p_rights)
 
 
+def content_key(obj: Any, depth: int = 3) -> str | None:
+    """A digest of what ``obj`` holds: its type, and each attribute's value (arrays by their bytes, shape and
+    dtype; objects, such as a sensor's grid, by their own attributes, ``depth`` levels down). Two objects with
+    the same digest compute the same. None when ``obj`` holds something whose content it cannot read (a
+    function, an object deeper than ``depth``): such an object has no key.
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> content_key(office()) == content_key(office()), content_key(office()) == content_key(office(0.2))
+    (True, False)
+    >>> content_key({"f": lambda x: x}) is None
+    True
+    """
+    h = hashlib.sha1()
+    opaque = []
+
+    def feed(o: Any, d: int) -> None:
+        h.update(type(o).__qualname__.encode())
+        if isinstance(o, np.ndarray):
+            h.update(f"{o.shape}{o.dtype}".encode())
+            h.update(np.ascontiguousarray(o).tobytes())
+        elif isinstance(o, (bool, int, float, complex, str, bytes, type(None), np.generic)):
+            h.update(repr(o).encode())
+        elif isinstance(o, (tuple, list)):
+            for v in o:
+                feed(v, d)
+        elif isinstance(o, dict):
+            for k in sorted(o, key=repr):
+                h.update(repr(k).encode())
+                feed(o[k], d)
+        elif isinstance(o, type):
+            h.update(f"{o.__module__}.{o.__qualname__}".encode())
+        elif d > 0 and hasattr(o, "__dict__") and not callable(o):     # a function's code is not its __dict__
+            feed(vars(o), d - 1)
+        else:
+            opaque.append(o)
+
+    feed(obj, depth)
+    return None if opaque else h.hexdigest()
+
+
+#: Evidence models calibrated in this process, by the content of what they were calibrated on (a few entries).
+_CALIBRATIONS: OrderedDict = OrderedDict()
+_CALIBRATIONS_KEPT = 4
+
+
+def calibrate_once(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, seed: int, **options: Any) -> EvidenceModel:
+    """:func:`calibrate` with ``np.random.default_rng(seed)``, computed once per process for the same map,
+    sensor model, beam angles, seed and options (the same inputs give the same model: the two passes of
+    ``localize run --smooth``, the runs of a notebook on one map, a test suite). A sensor model that
+    :func:`content_key` cannot read is calibrated every time.
+
+    Examples
+    --------
+    >>> from localize.maps import office
+    >>> from localize.sensors import LikelihoodField
+    >>> lf, angles = LikelihoodField(office(), 8.0, sigma_hit=0.1), np.linspace(-np.pi, np.pi, 36, endpoint=False)
+    >>> a = calibrate_once(office(), lf, angles, 0)
+    >>> a is calibrate_once(office(), LikelihoodField(office(), 8.0, sigma_hit=0.1), angles, 0)
+    True
+    >>> a is calibrate_once(office(), LikelihoodField(office(), 8.0, sigma_hit=0.2), angles, 0)
+    False
+    >>> np.array_equal(a.p_right, calibrate(office(), lf, angles, np.random.default_rng(0)).p_right)
+    True
+    """
+    a = np.asarray(angles, dtype=float)
+    key = content_key((grid, sensor, a, int(seed), options))
+    if key is None:                 # a sensor model whose content cannot be read (it holds a function): no cache
+        return calibrate(grid, sensor, a, np.random.default_rng(int(seed)), **options)
+    model = _CALIBRATIONS.get(key)
+    if model is None:
+        model = calibrate(grid, sensor, a, np.random.default_rng(int(seed)), **options)
+        _CALIBRATIONS[key] = model
+        while len(_CALIBRATIONS) > _CALIBRATIONS_KEPT:
+            _CALIBRATIONS.popitem(last=False)
+    _CALIBRATIONS.move_to_end(key)
+    return model
+
+
 class LocalizedBelief:
     """The binary Bayes filter over "the estimate is right": ``p_localized`` scan by scan.
 
@@ -522,7 +605,8 @@ class ReliabilityState:
     seed : int
         Seed of the calibration's own generator (the filter's random stream is not touched).
     model : EvidenceModel, optional
-        A calibration made beforehand (default: made at the first scan).
+        A calibration made beforehand (default: made at the first scan with :func:`calibrate_once`, once per
+        map, sensor model and beam angles in a process).
     fit_distance : float, optional
         Metres within which a reading agrees with the map (default: twice the sensor's ``sigma_hit``).
     rivals : bool
@@ -555,8 +639,8 @@ class ReliabilityState:
         return LocalizedBelief(model, p_lose=self.p_change, p_find=0.0, prior=0.5)
 
     def _calibrate(self, angles: NDArray) -> None:
-        self.model = calibrate(self.grid, self.sensor, angles, np.random.default_rng(self.seed),
-                               right_radius=self.radius, fit_distance=self.fit_distance)
+        self.model = calibrate_once(self.grid, self.sensor, angles, self.seed, right_radius=self.radius,
+                                    fit_distance=self.fit_distance)
         self.belief = self._fresh(self.model)
 
     def jumped(self, step: Any) -> bool:

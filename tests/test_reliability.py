@@ -285,3 +285,42 @@ def test_the_command_line_states_the_thresholds_the_state_uses():
     assert f"reached {LOCALIZED_AT};" in cli.STATE_MEANING and f"fell below {LOST_BELOW};" in cli.STATE_MEANING
     state = ReliabilityState(office(), LikelihoodField(office(), 8.0, sigma_hit=0.2))
     assert (state.localized_at, state.lost_below) == (LOCALIZED_AT, LOST_BELOW)
+
+
+# ------------------------------------------------------------------ calibrated once per map and sensor
+def test_calibrate_once_keys_on_content_and_never_on_a_function(monkeypatch):
+    """A second run on an equal map and sensor model reuses the model; any change of the map, the sensor's
+    parameters, the beams or the seed calibrates again; a sensor holding a function is never cached (its
+    content cannot be read, and a key by identity could match another function later); the cache stays small."""
+    from localize import reliability
+
+    monkeypatch.setattr(reliability, "_CALIBRATIONS", type(reliability._CALIBRATIONS)())
+    calls = []
+    real = reliability.calibrate
+    monkeypatch.setattr(reliability, "calibrate", lambda *a, **k: calls.append(1) or real(*a, **k))
+    angles = np.linspace(-np.pi, np.pi, 24, endpoint=False)
+
+    def run(grid=None, angles=angles, seed=0, **sensor):
+        grid = office() if grid is None else grid
+        return reliability.calibrate_once(grid, LikelihoodField(grid, 8.0, **{"sigma_hit": 0.1, **sensor}), angles,
+                                          seed, n_poses=40)
+
+    first = run()
+    assert run() is first and len(calls) == 1                       # a new, equal map and sensor: the cached one
+    run(sigma_hit=0.2), run(seed=1), run(angles=angles[::2])
+    data = office().data.copy()
+    data[50, 50] = 1.0 - data[50, 50]                                 # one cell of the map changed
+    run(grid=OccupancyGrid(data, office().resolution, office().origin))
+    assert len(calls) == 5                                           # each change calibrates anew
+    assert len(reliability._CALIBRATIONS) == reliability._CALIBRATIONS_KEPT
+    assert run() is not first and len(calls) == 6                    # the oldest was let go
+
+    class WithFunction(LikelihoodField):
+        pass
+
+    odd = WithFunction(office(), 8.0, sigma_hit=0.1)
+    odd.score = lambda x: x
+    assert reliability.content_key(odd) is None
+    reliability.calibrate_once(office(), odd, angles, 0, n_poses=40)
+    reliability.calibrate_once(office(), odd, angles, 0, n_poses=40)
+    assert len(calls) == 8                                           # never cached
