@@ -589,7 +589,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ROS maps: grey is wall, not unknown (default off)")
     groups = {"sensor": run.add_argument_group("sensor"), "filter": run.add_argument_group("filter")}
     groups["recovery"] = run.add_argument_group(
-        "recovery", "when the filter is wrong; the default --restart-after 5 suffices so far")
+        "recovery", "knowing when the filter is wrong, and finding the robot again: the default --state and "
+                    "--restart-after suffice so far; --injection, --augmented, --recovery-injection and --expand "
+                    "are expert settings, off by default")
     _settings.add_arguments(run, groups)  # one option per setting of localize.settings.RunSettings
     groups["filter"].add_argument("--seed", type=_seed, default=0, metavar="S",
                                   help="random seed: same seed, same run (default 0)")
@@ -893,8 +895,8 @@ def _report(summary: dict, n_scans: int, written: list[Path], smooth: bool) -> s
         headline(summary),
     ]
     if (summary.get("state") or {}).get("lost_intervals"):
-        lines.append("  (lost: the filter had been localized, then the scans stopped fitting the map at its estimate; "
-                     "it searches again)")
+        lines.append("  (lost: the filter had been localized, then stopped being sure of its estimate: the scans fit "
+                     "the map poorly there, or as well elsewhere; it searches again)")
     if smooth:
         from .smooth import headline as smooth_headline
         lines.append(smooth_headline(summary["smooth"]))

@@ -646,7 +646,10 @@ def run_filter(
         (:class:`~localize.reliability.ReliabilityState`: a Bayes filter over "the
         estimate is within 1 m", calibrated on the map and the sensor model; needs
         ``grid``), which then also drives ``restart_after``. ``p_localized`` of the
-        trace is NaN with thresholds.
+        trace is NaN with thresholds. The command line's default is the
+        probability (:class:`localize.settings.RunSettings`); this function keeps
+        the thresholds as its default, which need no map (chapter 8 passes
+        ``state="probability"``).
 
     Returns
     -------

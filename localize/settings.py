@@ -288,14 +288,16 @@ class RunSettings:
         while the state is 'lost', replace the fraction F of the particles by random ones at each
         resampling, so that the filter searches again (default {default}). Example: --recovery-injection 0""")
     restart_after: int = setting(
-        5, "global localization again after this many updates agreed on a place the scans do not fit (0: never)",
+        5, "global localization again after this many updates in doubt of the place the cloud agreed on (0: never)",
         _count0, unit="updates", valid="whole number >= 0", metavar="K", cli_help="""
         start global localization again (all --particles drawn over the map beside the cloud, each half of the
-        weight) when the cloud has agreed on one place but the scans have not fitted the map there for K
-        updates in a row: it is confidently wrong. Before the filter is first localized, a cloud gathered
-        more loosely (within 2 m) counts too, and so do updates at which the map cannot judge the scans at all
-        (their beams end in its unknown cells): a cloud stuck on such a place would otherwise search there
-        for ever. A "lost" filter whose best place has not fitted the scans for K updates restarts too. The
+        weight) when the cloud has agreed on one place but the filter has doubted it for K updates in a row:
+        it is confidently wrong. Doubt is p_localized below 0.7 with the default --state probability, and
+        scans that do not fit the map there with --state thresholds. Before the filter is first localized, a
+        cloud gathered more loosely (within 2 m) counts too (with --state thresholds, so do updates at which
+        the map cannot judge the scans at all, their beams ending in its unknown cells: a cloud stuck on such
+        a place would otherwise search there for ever). A "lost" filter that stays in doubt for K updates
+        restarts too. The
         old cloud and the new search then run side by side for up to 30 updates; the new one replaces the old
         place only if it wins both the sensor model's weight and the ray-cast fit of the scans, and fits them
         acceptably (default {default}; 0 never). Example: --restart-after 5""")
@@ -330,16 +332,16 @@ class RunSettings:
         the 0.5 m within which the cloud counts as agreed, more than its own error explains; 0 scores every
         beam). Example: --skip-short-beams 0""")
     state: str = setting(
-        "thresholds", "where the searching/localized/lost state comes from: thresholds or probability",
+        "probability", "where the searching/localized/lost state comes from: thresholds or probability",
         _choice("thresholds", "probability"), valid="thresholds or probability",
         choices=("thresholds", "probability"), cli_help="""
         'probability': the state comes from p_localized, the probability that the estimate is within 1 m of
         the robot (a Bayes filter over the scans' fit to the map, calibrated at start-up on this map and
         sensor model, weighed against look-alike places that the filter keeps as rivals and moves to when one
         fits 19 times better; localized at 0.95, lost below 0.7; restarts when it stays below 0.7), written to
-        trajectory.csv and summary.json; 'thresholds': the fixed rules of localize.policies.StateRules
-        (default {default}; see localize.reliability for what the probability does better and worse).
-        Example: --state probability""")
+        trajectory.csv and summary.json; 'thresholds': the fixed rules of localize.policies.StateRules,
+        chosen on five logs, the default before stop 53 (default {default}; localize.reliability says what
+        the probability still gets wrong). Example: --state thresholds""")
     occupied_penalty: float = setting(
         5.0, "log-likelihood a particle in an obstacle loses per update (inf: zero weight)", _penalty,
         unit="nats", valid="> 0 or inf", metavar="NATS", cli_help="""
@@ -531,7 +533,7 @@ CLI_GROUPS: dict[str, tuple[str, str]] = {
     "min_particles": ("filter", "with --kld: never fewer particles"),
     "augmented": ("recovery", "augmented MCL rates (0 0: off)"),
     "recovery_injection": ("recovery", "while lost: random particles"),
-    "restart_after": ("recovery", "search again after K misfits (0: no)"),
+    "restart_after": ("recovery", "search again after K updates in doubt (0: no)"),
     "min_ess": ("filter", "keep F*N effective particles (0: off)"),
     "expand": ("recovery", "spread the cloud on misfit"),
     "unknown_beams": ("sensor", "unknown-cell beams: skip, score"),

@@ -313,7 +313,8 @@ def test_benchmark_small_version(shared_data, capsys):
     for r in rows[2:]:
         cells = [c.strip() for c in r.strip("|").split("|")]
         assert cells[1] == "120" and int(cells[2]) <= 120       # scans, of them localized
-    assert "Calibration of `p_localized`" not in out     # the default (threshold) state has no p_localized
+    assert "Calibration of `p_localized`" in out         # the default state is the probability's: its reliability
+    assert "| p_localized | scans | mean p | share within 1 m | difference |" in out
 
 
 def test_simulated_laser_reports_no_return_where_nothing_is_in_range():

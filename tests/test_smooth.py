@@ -222,17 +222,15 @@ def test_smoothing_localizes_the_start_that_the_forward_pass_searched(seed):
     assert summ["share_agree_where_both_localized"] > 0.9
 
 
-@pytest.mark.parametrize("seed", [2, 4])
+@pytest.mark.parametrize("seed", [1, 38])
 def test_smoothing_fixes_a_forward_pass_localized_in_the_wrong_place(seed):
-    """Seeds 2 and 4: with these settings the forward pass locks onto a wrong place of the office and says
+    """Seeds 1 and 38: with these settings the forward pass locks onto a wrong place of the office and says
     "localized"; the backward pass is right. The scan fit gives the stretch to the backward pass, and no smoothed
-    scan claims a wrong place. In seed 4 the forward pass, lost, re-localizes at a look-alike place for the last
-    scans, which the backward pass (its own start) has not localized: the backward estimate fits them better, so
-    the forward pass is overruled there. Measured with the simulated laser that reports no return where nothing
-    is in range (stop 52, this test's run over seeds 0-27): the forward pass calls a wrong place localized in 1,
-    2, 4, 5, 21, 22 and 26. Smoothing fixes 2 and 4; in 1, 5 and 26 both passes agree on the wrong place at some
-    scans, which smoothing cannot fix, and in 21 and 22 some smoothed scans keep a wrong claim (21: 32 such scans
-    against the forward pass's 6)."""
+    scan claims a wrong place. Measured with the default state (the probability, stop 53; this test's criteria over
+    seeds 0-59): the forward pass calls a wrong place localized at
+    more than 10 scans in seeds 1, 2, 4, 5, 26, 38 and 53 (with the threshold state: 1, 2, 4, 5, 22, 28, 33, 41, 43,
+    49 and 53). Smoothing fixes 1, 38 and 53; in 2, 4 and 5 both passes agree on the wrong place at some scans,
+    which smoothing cannot fix, and in 26 two smoothed scans keep a wrong claim (the forward pass's 30)."""
     log, truth = _office_log(seed)
     res = smooth.smooth_log(office(), log, rng=np.random.default_rng(seed),
                             **_cli_kwargs("--particles", "20000", "--max-range", "8"))

@@ -19,9 +19,9 @@ and ``trace.p_localized`` only where a trace has one. The rules, after the issue
   0.3 m (see :func:`check_probability`), and never rising while the laser is dead.
 
 Each test runs two seeds (two filters on the same simulated log; about a
-second of CPU each). The tests that the threshold state of today fails are
-marked ``xfail(strict=True)`` with what it does wrong; remove the mark when
-the state passes. ``test_the_checks_catch_a_dishonest_state`` feeds the checks
+second of CPU each). A test that the state fails is marked
+``xfail(strict=True)`` with what it does wrong; remove the mark when the
+state passes. ``test_the_checks_catch_a_dishonest_state`` feeds the checks
 doctored traces (always localized, lost while right, a probability that
 claims too much) and asserts that each check fails on them.
 """
@@ -63,8 +63,8 @@ SEEDS = (0, 1)
 
 
 # ============================================================================ the checks
-#: The state under test: issue 43's probability (``localize run --state probability``); the threshold state's
-#: own tests are in test_cli.py.
+#: The state under test: issue 43's probability (the default of ``localize run``, ``--state probability``); the
+#: threshold state's own tests are in test_cli.py.
 STATE = "probability"
 
 

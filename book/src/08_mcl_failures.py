@@ -720,8 +720,9 @@ assert 0.7 < np.mean(rights[sure]) < 0.99                           # "sure" is 
 # featureless corridor, four rivals are not the corridor's continuum of
 # look-alikes) and measured on real logs and maps that none of this was
 # chosen on (`benchmarks/RESULTS.md`, `bench_global_state_probability`).
-# This is why the command line keeps the threshold state as its default for
-# now (`localize run --state probability` turns this one on). Chapter 9 adds
+# The command line uses this state by default; `localize run --state
+# thresholds` brings back the fixed rules of `StateRules`, which do no better
+# on any of these cases. Chapter 9 adds
 # the policies a real log needs (odometry records that are wrong, a robot
 # that stands still, beams that hit what the map does not show).
 #

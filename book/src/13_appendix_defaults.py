@@ -152,9 +152,21 @@ folder = Path(tempfile.mkdtemp())
 #   searching, a particle in an obstacle keeps zero weight, because there it
 #   is only one wrong hypothesis among many. Outside the map it has zero
 #   weight either way.
+# * **`--state probability`** — the state (*searching*, *localized*, *lost*)
+#   comes from `p_localized`, the probability that the estimate is within 1 m
+#   of the robot: chapter 8's Bayes filter over the scans' fit to the map,
+#   whose $p(\text{fit} \mid \text{right})$ and $p(\text{fit} \mid
+#   \text{wrong})$ are calibrated when the run starts on the run's own map and
+#   sensor model, weighed against the places elsewhere that fit as well
+#   (chapter 9 lists its parts). *Localized* from 0.95, *lost* below 0.7: two
+#   documented thresholds on a probability, not a dozen on the evidence.
+#   `--state thresholds` brings back those dozen (`localize.policies.StateRules`:
+#   cluster share and spread, fit ratios, a probe, scans in a row), chosen on
+#   the five buildings below; the benchmark measures both.
 # * **`--restart-after 5`** — what to do when the filter is *confidently
-#   wrong*: its cloud agrees on one place, but for five updates in a row the
-#   scans have not fitted the map there. Global localization starts again, but
+#   wrong*: its cloud agrees on one place, but for five updates in a row
+#   `p_localized` has stayed below 0.7 (with `--state thresholds`: the scans
+#   have not fitted the map there). Global localization starts again, but
 #   the old cloud is kept, because clutter can make a correct place fit badly
 #   for a while. A fresh uniform cloud, as many particles as at the start, is
 #   added beside the old one, each with half of the weight, and the two are *on
@@ -170,13 +182,15 @@ folder = Path(tempfile.mkdtemp())
 #   the first three scans, too few to judge by), and the state is not
 #   *localized*.
 #
-#   Three more cases count as confidently wrong. Before the filter is first
-#   localized, a cloud gathered within 2 m (not only 0.5 m) counts as agreed,
-#   and an update whose beams all end in unknown cells (so the map cannot judge
-#   them) counts as not fitting: otherwise a cloud stuck in a room whose beams
-#   all end in the unknown would search there to the end of the log. And a
-#   filter that is *lost*, whose best place has not fitted for five updates,
-#   restarts too, whether its cloud is gathered or spread out.
+#   Two more cases count as confidently wrong. Before the filter is first
+#   localized, a cloud gathered within 2 m (not only 0.5 m) counts as agreed.
+#   And a filter that is *lost*, in doubt for five updates, restarts too,
+#   whether its cloud is gathered or spread out. (With `--state thresholds`
+#   an update whose beams all end in unknown cells, so that the map cannot
+#   judge them, counts as not fitting as well: otherwise a cloud stuck in a
+#   room whose beams all end in the unknown would search there to the end of
+#   the log. For the probability such updates are no evidence that the place
+#   is right.)
 # * **`--min-range 0.05`** — readings at or below 5 cm are failures, not
 #   evidence (ROS AMCL's `laser_min_range`).
 #
@@ -203,22 +217,36 @@ def results_section(name):
 
 
 def table_rows(section):
-    """The data rows of the section's table, by their first cell (a list of the row's cells)."""
-    rows = {}
+    """The data rows of the section's first table, by their first cell (a list of the row's cells)."""
+    rows, inside = {}, False
     for line in section.splitlines():
+        if inside and not line.startswith("|"):
+            break                                           # the end of the first table
+        inside = line.startswith("|")
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if line.startswith("|") and len(cells) > 2 and cells[1].isdigit():
+        if inside and len(cells) > 2 and cells[1].isdigit():
             rows[cells[0]] = cells
     return rows
+
+
+def all_row(section):
+    """The cells of the row "all" of the section's scan-by-scan table."""
+    return [[c.strip() for c in line.strip().strip("|").split("|")] for line in section.splitlines()
+            if line.startswith("| all |")][0]
 
 
 section = results_section("bench_global")
 print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 
 # %% [markdown]
-# The benchmark's goal — 95% success on every log — is reached: Intel (100%), Freiburg 079 (97%), ACES (100%), CSAIL (98%)
-# and the simulated Willow runs (95%), with the least to spare on Willow.
-# Each default named above is there for one of these failures. The map-sized
+# The benchmark's goal — 95% success on every log — is reached on the four
+# real logs, Intel (100%), Freiburg 079 (98%), ACES (98%) and CSAIL (97%), and
+# missed by one run on the simulated Willow runs (93%, 56 of 60).
+# Each default named above is there for one of these failures. They were
+# measured when the threshold state was the default, each against the
+# threshold state's run of the same draw (the section
+# `bench_global_state_thresholds`: Intel 100%, Freiburg 97%, ACES 100%,
+# CSAIL 98%, Willow 95%), which the percentages below compare with. The map-sized
 # initial cloud is for ACES, where a fixed cloud of 50,000 particles, started
 # in a stretch of the building that looks the same in several places, often
 # localized only after the first 30% of the run. Leaving out the beams that
@@ -258,14 +286,17 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # place; deciding by the weight alone, the filter would jump there.
 #
 # What the table does show is honesty: no run ended "localized" while more
-# than 1 m off. A failed run ended either "lost" or "searching", and said so,
-# or localized again within 1 m of the robot after it had left it. The last
-# column is stricter: three Willow runs did call a wrong place "localized" for
-# a few scans early on, each time the mirror image of the right place in that
-# large, symmetric building (heading 180 degrees off), whose scans passed the
-# fit test too, before the state turned "lost" and the search went on. The next
-# cell checks these statements against the table, so that a re-run of the
-# benchmark cannot silently contradict them.
+# than 1 m off. A failed run ended "lost" or "searching", and said so, or
+# localized again within 1 m of the robot after it had left it. The last
+# column is stricter: five runs (two on ACES, one on CSAIL, two on Willow)
+# called a wrong place "localized" at some scans, 14 of the 84,016 scans
+# called localized in all (the table below it, scan by scan). The threshold
+# state's run of the same draw calls 23 localized while more than 1 m off, and
+# says "localized" at 93.9% of the scans within 0.3 m of the truth (after the
+# first localized scan) where the probability says it at 98.8%: the threshold
+# state is lost far more often while right. The next cell checks these
+# statements against the tables, so that a re-run of the benchmark cannot
+# silently contradict them.
 
 # %% tags=["remove-cell"]
 if section:
@@ -274,22 +305,28 @@ if section:
         ok, runs = cells[2].split()[0].split("/")
         rows[name] = dict(success=int(ok) / int(runs), off=int(cells[9]))
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rows), sorted(rows)
-    claims = {"intel": 1.0, "freiburg-079": 0.97, "aces": 1.0, "csail": 0.98, "willow": 0.95}
+    claims = {"intel": 1.0, "freiburg-079": 0.98, "aces": 0.98, "csail": 0.97, "willow": 0.93}
     for log_name, rate in claims.items():
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
-    assert all(r["success"] >= 0.95 for r in rows.values()), rows
+    assert rows["willow"]["success"] == 56 / 60
     assert all(r["off"] == 0 for r in rows.values())
     some_scan = {name: int(cells[10]) for name, cells in table_rows(section).items()}
-    assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 0, "csail": 0, "willow": 3}, some_scan
+    assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 2, "csail": 1, "willow": 2}, some_scan
+    assert all_row(section)[2] == "84016" and all_row(section)[3].startswith("14 ") and "(98.8%)" in all_row(section)[5]
+    thresholds = results_section("bench_global_state_thresholds")
+    t_rows = {name: cells[2].split()[0] for name, cells in table_rows(thresholds).items()}
+    assert t_rows == {"intel": "60/60", "freiburg-079": "58/60", "aces": "60/60", "csail": "59/60",
+                      "willow": "57/60"}, t_rows
+    assert all_row(thresholds)[3].startswith("23 ") and "(93.9%)" in all_row(thresholds)[5], all_row(thresholds)
     scored = {name: cells[2].split()[0]
               for name, cells in table_rows(results_section("bench_global_short_beams_0")).items()}
     assert scored == {"intel": "60/60", "freiburg-079": "58/60", "aces": "59/60", "csail": "59/60",
                       "willow": "53/60"}, scored
     ended = [sum(int(cells[8]) for cells in table_rows(results_section(name)).values())
-             for name in ("bench_global", "bench_global_short_beams_0")]
+             for name in ("bench_global_state_thresholds", "bench_global_short_beams_0")]
     assert ended == [277, 277], ended
     wrong_at_some_scan = [sum(int(cells[10]) for cells in table_rows(results_section(name)).values())
-                          for name in ("bench_global", "bench_global_short_beams_0")]
+                          for name in ("bench_global_state_thresholds", "bench_global_short_beams_0")]
     assert wrong_at_some_scan == [3, 6], wrong_at_some_scan
     without = {name: cells[2].split()[0] for name, cells in table_rows(results_section("bench_global_z_short_0")).items()}
     assert without == {"intel": "60/60", "freiburg-079": "58/60", "aces": "57/60", "csail": "59/60",
@@ -303,7 +340,7 @@ from localize.grid import OccupancyGrid  # noqa: E402
 assert abs(pipeline.auto_particles(OccupancyGrid(np.zeros((400, 130)), 0.1)) - 75_000) < 500   # 520 m^2 of free floor
 d = settings.DEFAULTS                                                # the defaults the text names
 assert (d["sigma_hit"], d["temper"], d["z_short"], d["beams"], d["min_range"]) == (0.2, 0.3, 0.2, 30, 0.05), d
-assert (d["odometry_sign"], d["occupied_penalty"], d["restart_after"]) == ("auto", 5.0, 5), d
+assert (d["odometry_sign"], d["occupied_penalty"], d["restart_after"], d["state"]) == ("auto", 5.0, 5, "probability"), d
 assert d["skip_short_beams"] == 1.0 and d["unknown_beams"] == "skip", d
 
 # %% [markdown]
@@ -318,28 +355,36 @@ held_out = results_section("bench_global_held_out")
 print(held_out or "benchmarks/RESULTS.md has no bench_global_held_out section yet")
 
 # %% [markdown]
-# The four real logs reach 95% there too. The simulated Willow runs do not
-# (87%), and here the work is not finished: in most of the failed runs the
+# The four real logs reach 95% there too (CSAIL just: 57 of 60). The simulated
+# Willow runs do not (85%; the threshold state: 87%), and here the work is not
+# finished: in most of the failed runs the
 # filter finds the robot, but only after the first 30% of the run. Where the
 # simulated robot starts inside the square that the degraded map leaves
 # unknown, or next to unmapped clutter, its first scans say nothing the map
 # can check, and the search settles on places whose beams end in the map's
 # unknown cells, which a likelihood field cannot rule out; the restart rules
-# above find the robot later. The note of that section in
-# `benchmarks/RESULTS.md` lists the failures. The honesty holds on this draw
-# as well: no run ended "localized" more than 1 m off, and four runs (two on
-# ACES, one each on Freiburg and Willow) called a look-alike "localized" for a
-# few scans before the state turned "lost".
+# above find the robot later. The note of the threshold state's section in
+# `benchmarks/RESULTS.md` (`bench_global_held_out_state_thresholds`) lists
+# its failures, and `bench_global_experiments_stop51` why they start in the
+# unknown square. The honesty holds on this draw as well: no run ended
+# "localized" more than 1 m off; six runs (three on CSAIL, three on Willow)
+# called a wrong place "localized" at some scans, 64 of the 82,981 scans
+# called localized (0.08%; the threshold state 29, 0.04%), and 99.1% of the
+# scans within 0.3 m said "localized" (the threshold state 94.0%).
 
 # %% tags=["remove-cell"]
 if held_out:
     rates = {name: cells[2].split()[0] for name, cells in table_rows(held_out).items()}
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rates), rates
     assert all(int(r.split("/")[0]) >= 0.95 * int(r.split("/")[1]) for name, r in rates.items() if name != "willow"), rates
-    assert rates["willow"] == "52/60", rates                                  # 87%
+    assert rates["willow"] == "51/60" and rates["csail"] == "57/60", rates   # 85%, 95%
     assert all(int(cells[9]) == 0 for cells in table_rows(held_out).values())
     some_scan = {name: int(cells[10]) for name, cells in table_rows(held_out).items()}
-    assert some_scan == {"intel": 0, "freiburg-079": 1, "aces": 2, "csail": 0, "willow": 1}, some_scan
+    assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 0, "csail": 3, "willow": 3}, some_scan
+    assert all_row(held_out)[2] == "82981" and all_row(held_out)[3].startswith("64 ") and "(99.1%)" in all_row(held_out)[5]
+    t_held_out = results_section("bench_global_held_out_state_thresholds")
+    assert table_rows(t_held_out)["willow"][2].startswith("52/60")
+    assert all_row(t_held_out)[3].startswith("29 ") and "(94.0%)" in all_row(t_held_out)[5], all_row(t_held_out)
 
 # %% [markdown]
 # ## Odometry surprises on the Freiburg log
@@ -500,7 +545,8 @@ plt.show()
 # %% [markdown]
 # On the benchmark's logs and degraded maps (`benchmarks/bench_smooth.py`: the
 # same runs as `bench_global`, 20 starts x 2 seeds per data set, each
-# trajectory judged by bench_global's rule), the forward pass alone now
+# trajectory judged by bench_global's rule; measured with the threshold state,
+# `--state thresholds`, the default then), the forward pass alone
 # succeeds in 197 of 200 runs, and smoothing adds little to that: it turns 3
 # failures into successes and 2 successes into failures (198 of 200). What it
 # adds is the share of each log that is localized — 95% of the scans instead
