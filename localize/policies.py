@@ -625,7 +625,6 @@ class Restart:
     def __init__(self, after: int, n_fresh: int, lost_below: float = LOST_BELOW) -> None:
         self.after, self.n_fresh, self.lost_below = int(after), int(n_fresh), float(lost_below)
         self.poor = self.lost_run = self.unjudged = 0
-        self.by_p = False                      # counted with p_localized (the probability state)
 
     def count(self, step: Step, ctx: Context, evidence: MapEvidence, gathered: bool) -> None:
         """Count the step's evidence against the place the cloud is on."""
@@ -654,7 +653,6 @@ class Restart:
         cloud agrees or not (outside a probation)."""
         if not step.updated:
             return
-        self.by_p = True
         wrong = step.p_localized < self.lost_below
         self.poor = self.poor + 1 if (wrong and (step.agreed or gathered)) else 0
         self.lost_run = self.lost_run + 1 if (ctx.state == "lost" and wrong and ctx.probation is None) else 0
@@ -670,7 +668,7 @@ class Restart:
         fresh = np.asarray(mcl.sampler(self.n_fresh, mcl.rng), dtype=float)
         ctx.probation = Probation(mcl.n, step.pose, min_fit, ctx.rules.fit_window)
         mcl.add_particles(fresh, share=0.5)
-        if self.by_p:
+        if np.isfinite(step.p_localized):                   # counted with p_localized (count_p)
             n_poor = max(self.poor, self.lost_run)
             where = (f"p_localized has stayed below {self.lost_below:g} at the place the cloud agreed or gathered on"
                      if self.poor >= self.after else

@@ -443,16 +443,15 @@ def calibrate_once(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, seed: in
     True
     """
     a = np.asarray(angles, dtype=float)
-    key = content_key((grid, sensor, a, int(seed), options))
-    if key is None:                 # a sensor model whose content cannot be read (it holds a function): no cache
-        return calibrate(grid, sensor, a, np.random.default_rng(int(seed)), **options)
-    model = _CALIBRATIONS.get(key)
-    if model is None:
-        model = calibrate(grid, sensor, a, np.random.default_rng(int(seed)), **options)
+    key = content_key((grid, sensor, a, int(seed), options))   # None: content it cannot read, never cached
+    if key in _CALIBRATIONS:
+        _CALIBRATIONS.move_to_end(key)
+        return _CALIBRATIONS[key]
+    model = calibrate(grid, sensor, a, np.random.default_rng(int(seed)), **options)
+    if key is not None:
         _CALIBRATIONS[key] = model
         while len(_CALIBRATIONS) > _CALIBRATIONS_KEPT:
             _CALIBRATIONS.popitem(last=False)
-    _CALIBRATIONS.move_to_end(key)
     return model
 
 
