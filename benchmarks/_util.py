@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
+import multiprocessing as mp
 import time
+from pathlib import Path
 from typing import Callable
 
 
@@ -24,6 +27,33 @@ def table(rows: list[dict], columns: list[str]) -> str:
     sep = "|" + "|".join("---" for _ in columns) + "|"
     body = ["| " + " | ".join(str(r.get(c, "")) for c in columns) + " |" for r in rows]
     return "\n".join([head, sep, *body])
+
+
+def run_jobs(run_one: Callable[[dict], dict], jobs: list[dict], workers: int = 2,
+             json_path: Path | None = None) -> list[dict]:
+    """``run_one`` on every job, in ``workers`` forked processes when more than one; the rows in the order they
+    finish, each also appended to ``json_path`` (JSON lines) at once, so that a run cut short keeps what it did."""
+    rows: list[dict] = []
+    sink = open(json_path, "w") if json_path else None
+
+    def keep(row: dict) -> None:
+        rows.append(row)
+        if sink:
+            sink.write(json.dumps(row) + "\n")
+            sink.flush()
+
+    try:
+        if workers > 1:
+            with mp.get_context("fork").Pool(workers) as pool:
+                for row in pool.imap_unordered(run_one, jobs, chunksize=1):
+                    keep(row)
+        else:
+            for job in jobs:
+                keep(run_one(job))
+    finally:
+        if sink:
+            sink.close()
+    return rows
 
 
 def best_wall_cpu(fn: Callable[[], object], repeats: int = 5) -> tuple[float, float]:

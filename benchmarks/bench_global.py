@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing as mp
 import os
 import sys
 import time
@@ -44,6 +43,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
+
+from _util import run_jobs, table  # noqa: E402
 
 from localize import io, mapping, pipeline, settings, sim  # noqa: E402
 from localize.geometry import angle_diff  # noqa: E402
@@ -457,32 +458,17 @@ def main(argv=None) -> int:
     # interleave the logs, so that a run stopped early still covers every log
     jobs.sort(key=lambda j: (j["seed"], j["order"], j["name"]))
     t1 = time.perf_counter()
-    rows = []
-    sink = open(args.json, "w") if args.json else None
     if args.table_from:
         rows = [json.loads(line) for line in open(args.table_from) if line.strip()]
         jobs = rows
-    elif args.workers > 1:
-        with mp.get_context("fork").Pool(args.workers) as pool:
-            for r in pool.imap_unordered(run_one, jobs, chunksize=1):
-                rows.append(r)
-                if sink:
-                    sink.write(json.dumps(r) + "\n")
-                    sink.flush()
     else:
-        for j in jobs:
-            rows.append(run_one(j))
-            if sink:
-                sink.write(json.dumps(rows[-1]) + "\n")
-                sink.flush()
+        rows = run_jobs(run_one, jobs, args.workers, args.json)
     wall = time.perf_counter() - t1
     if args.table_from:
         wall = sum(r["wall"] for r in rows) / max(args.workers, 1)
     cols = ["log", "runs", "success", "scans to conv. median", "p90", "error after conv. median (m)",
             "wall per run median (s)", "real-time factor median", "ended localized", "ended localized > 1 m off",
             "localized > 1 m off at some scan"]
-    from _util import table
-
     cmd = "nice python benchmarks/bench_global.py" + "".join(
         f" {a}" for a in (argv if argv is not None else sys.argv[1:]) if a != "--write")
     quality, calib = state_quality(rows), calibration(rows)
@@ -509,8 +495,6 @@ def main(argv=None) -> int:
         figure = reliability_figure(rows, HERE / f"{args.section}_reliability.png")
         text += f"\n![reliability of p_localized]({figure.name})\n"
     print(text)
-    if sink:
-        sink.close()
     if args.write:
         write_section(text, args.section)
     return 0
