@@ -149,7 +149,6 @@ def run_one(job: dict) -> dict:
     return {"name": job["kind"], "kind": job["kind"], "laser": job["laser"], "seed": job["seed"],
             "state": job["state"], "scans": len(log), "success": j["success"], "wall": wall,
             "final_error": j["final_error"], "final_state": str(res.state[-1]),
-            "scans_false_localized": int(np.sum((res.state == "localized") & (j["errors"] > bg.STAY_M))),
             "first_localized": res.trace.first_localized(), **bg.state_counts(res.trace, j["errors"])}
 
 

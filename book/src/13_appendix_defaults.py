@@ -216,23 +216,20 @@ def results_section(name):
     return (section[:section.find("\n## ", 3)] if "\n## " in section[3:] else section).strip()
 
 
-def table_rows(section):
-    """The data rows of the section's first table, by their first cell (a list of the row's cells)."""
-    rows, inside = {}, False
+def table_rows(section, table=0):
+    """The data rows of the section's ``table``-th table (0: the first), by their first cell (a list of the row's
+    cells)."""
+    rows, inside, seen = {}, False, -1
     for line in section.splitlines():
-        if inside and not line.startswith("|"):
-            break                                           # the end of the first table
-        inside = line.startswith("|")
+        starts = line.startswith("|")
+        seen += starts and not inside                      # a table begins
+        if inside and not starts and seen == table:
+            break                                           # the end of the table wanted
+        inside = starts
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if inside and len(cells) > 2 and cells[1].isdigit():
+        if inside and seen == table and len(cells) > 2 and cells[1].isdigit():
             rows[cells[0]] = cells
     return rows
-
-
-def all_row(section):
-    """The cells of the row "all" of the section's scan-by-scan table."""
-    return [[c.strip() for c in line.strip().strip("|").split("|")] for line in section.splitlines()
-            if line.startswith("| all |")][0]
 
 
 section = results_section("bench_global")
@@ -314,12 +311,15 @@ if section:
     assert sum(int(cells[8]) for cells in table_rows(section).values()) == 300    # every run ended localized
     some_scan = {name: int(cells[10]) for name, cells in table_rows(section).items()}
     assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 2, "csail": 1, "willow": 2}, some_scan
-    assert all_row(section)[2] == "84016" and all_row(section)[3].startswith("14 ") and "(98.8%)" in all_row(section)[5]
+    scans_section = table_rows(section, 1)["all"]   # the scan-by-scan table's row "all"
+    assert scans_section[2] == "84016" and scans_section[3].startswith("14 ") and "(98.8%)" in scans_section[5], \
+        scans_section
     thresholds = results_section("bench_global_state_thresholds")
     t_rows = {name: cells[2].split()[0] for name, cells in table_rows(thresholds).items()}
     assert t_rows == {"intel": "60/60", "freiburg-079": "58/60", "aces": "60/60", "csail": "59/60",
                       "willow": "57/60"}, t_rows
-    assert all_row(thresholds)[3].startswith("23 ") and "(93.9%)" in all_row(thresholds)[5], all_row(thresholds)
+    scans_thresholds = table_rows(thresholds, 1)["all"]   # the scan-by-scan table's row "all"
+    assert scans_thresholds[3].startswith("23 ") and "(93.9%)" in scans_thresholds[5], scans_thresholds
     scored = {name: cells[2].split()[0]
               for name, cells in table_rows(results_section("bench_global_short_beams_0")).items()}
     assert scored == {"intel": "60/60", "freiburg-079": "58/60", "aces": "59/60", "csail": "59/60",
@@ -383,10 +383,13 @@ if held_out:
     assert all(int(cells[9]) == 0 for cells in table_rows(held_out).values())
     some_scan = {name: int(cells[10]) for name, cells in table_rows(held_out).items()}
     assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 0, "csail": 3, "willow": 3}, some_scan
-    assert all_row(held_out)[2] == "82981" and all_row(held_out)[3].startswith("64 ") and "(99.1%)" in all_row(held_out)[5]
+    scans_held_out = table_rows(held_out, 1)["all"]   # the scan-by-scan table's row "all"
+    assert scans_held_out[2] == "82981" and scans_held_out[3].startswith("64 ") and "(99.1%)" in scans_held_out[5], \
+        scans_held_out
     t_held_out = results_section("bench_global_held_out_state_thresholds")
     assert table_rows(t_held_out)["willow"][2].startswith("52/60")
-    assert all_row(t_held_out)[3].startswith("29 ") and "(94.0%)" in all_row(t_held_out)[5], all_row(t_held_out)
+    scans_t_held_out = table_rows(t_held_out, 1)["all"]   # the scan-by-scan table's row "all"
+    assert scans_t_held_out[3].startswith("29 ") and "(94.0%)" in scans_t_held_out[5], scans_t_held_out
 
 # %% [markdown]
 # Both draws are of the same five buildings. `benchmarks/bench_state.py` asks
