@@ -60,9 +60,9 @@ grids of alike rooms, and at ``p_localized`` 0.6-0.9 the estimate is right
 calibration's (``bench_global_experiments_stop55``): it scores the estimate,
 which the filter keeps where the scans fit best, against rivals that follow
 it rigidly and are re-placed only every few scans, so a rival on the robot's
-place but a few centimetres off it loses nats at most scans (``tests/test_rivals.py``,
-a strict xfail), and it counts two poses less than a metre apart as one place
-whatever their headings.
+place but a few centimetres off it loses nats at most scans
+(``tests/test_rivals.py``, a strict xfail), and it counts two poses less than
+a metre apart as one place whatever their headings.
 
 This follows the reliability estimation of Akai et al. (*Reliable Monte Carlo
 localization for mobile robots*, 2023; als_ros), where a classifier's output
