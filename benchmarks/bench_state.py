@@ -140,7 +140,7 @@ def prepare(job: dict):
 
 def run_one(job: dict) -> dict:
     grid, log = prepare(job)
-    s = settings.parse_options(["--state", job["state"]])
+    s = settings.parse_options(["--state", job["state"], *job.get("args", [])])
     s = replace(s, particles=pipeline.resolve_particles(s.particles, grid))
     t0 = time.perf_counter()
     res = pipeline.localize_log(grid, log, rng=np.random.default_rng(job["seed"]), settings=s)
@@ -233,6 +233,8 @@ def main(argv=None) -> int:
     ap.add_argument("--table-from", type=Path, nargs="+", default=None, metavar="FILE",
                     help="do not run: print the tables of the runs stored by --json in these files (e.g. one state's "
                          "runs from one file and the other's, measured on other code of that state, from another)")
+    ap.add_argument("--args", default="", metavar="'OPTIONS'",
+                    help="options of `localize run` for every run (experiments), e.g. --args '--sensor-reset 0.1'")
     ap.add_argument("--write", action="store_true",
                     help="write the bench_state section of RESULTS.md (bench_state_held_out with --first-seed)")
     args = ap.parse_args(argv)
@@ -240,7 +242,9 @@ def main(argv=None) -> int:
         bad = [g for g in given if g not in known]
         if bad:
             ap.error(f"{name}: unknown {', '.join(bad)}; choose from {', '.join(known)}")
-    jobs = [{"kind": k, "laser": la, "seed": seed, "state": s, "scans": args.scans}
+    if args.write and args.args:
+        ap.error("--write writes the defaults' section: leave --args out")
+    jobs = [{"kind": k, "laser": la, "seed": seed, "state": s, "scans": args.scans, "args": args.args.split()}
             for seed in range(args.first_seed, args.first_seed + args.seeds) for k in args.kinds for la in args.lasers for s in args.states]
     t0 = time.perf_counter()
     if args.table_from:

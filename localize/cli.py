@@ -590,8 +590,8 @@ def build_parser() -> argparse.ArgumentParser:
     groups = {"sensor": run.add_argument_group("sensor"), "filter": run.add_argument_group("filter")}
     groups["recovery"] = run.add_argument_group(
         "recovery", "knowing when the filter is wrong, and finding the robot again: the default --state and "
-                    "--restart-after suffice so far; --injection, --augmented, --recovery-injection and --expand "
-                    "are expert settings, off by default")
+                    "--restart-after suffice so far; --injection, --augmented, --recovery-injection, --expand and "
+                    "--sensor-reset are expert settings, off by default")
     _settings.add_arguments(run, groups)  # one option per setting of localize.settings.RunSettings
     groups["filter"].add_argument("--seed", type=_seed, default=0, metavar="S",
                                   help="random seed: same seed, same run (default 0)")

@@ -61,6 +61,7 @@ __all__ = [
     "ReversibleOdometry",
     "VelocityMotion",
     "Augmented",
+    "Proposal",
     "KLDSampling",
     "gaussian_particles",
     "uniform_particles",
@@ -207,6 +208,28 @@ class MCLStatus:
         """Start a new step: nothing resampled or injected yet."""
         self.resampled = False
         self.n_injected = 0
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """Where the particles injected at a resampling are drawn, and what each weighs (:meth:`MCL.resample`).
+
+    ``draw(n, rng)`` returns ``(n, 3)`` poses. ``log_weight(poses)``, when
+    given, is the log of each drawn particle's weight against a kept one's
+    (an importance weight: the particles are no longer drawn from the belief
+    alone); None weighs them alike, as random injection does.
+
+    Examples
+    --------
+    >>> f = toy_mcl()
+    >>> f.resample(injection=0.5, proposal=Proposal(lambda n, rng: np.full((n, 3), 9.0), lambda p: np.full(len(p), -1.0)))
+    >>> drawn = f.particles[:, 0] == 9.0
+    >>> int(drawn.sum()), round(float(f.weights[drawn][0] / f.weights[~drawn][0]), 3)       # exp(-1)
+    (50, 0.368)
+    """
+
+    draw: Sampler
+    log_weight: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
 
 
 @dataclass(frozen=True)
@@ -682,14 +705,17 @@ class MCL:
             return True
         return _rs.needs_resampling(self.weights, self.resample_threshold)
 
-    def resample(self, injection: float | None = None) -> None:
+    def resample(self, injection: float | None = None, proposal: Proposal | None = None) -> None:
         """Draw a new, equally weighted particle set (always; see :meth:`needs_resampling`).
 
         With KLD-sampling the new set's size is chosen by the KLD bound; then
         random particles replace ``injection * N`` of the new set (rounded)
         or, with augmented MCL, each particle with probability ``p_inject``
         -- whichever replaces more. ``injection`` (in [0, 1)) overrides the
-        filter's own share for this resampling only.
+        filter's own share for this resampling only, and ``proposal`` (a
+        :class:`Proposal`) where the injected particles are drawn instead of
+        the filter's own sampler, and what they weigh (sensor resetting draws
+        them where the scan fits: :class:`localize.policies.SensorReset`).
 
         Examples
         --------
@@ -729,13 +755,19 @@ class MCL:
         if n_inj > 0:
             where = self.rng.choice(n, size=n_inj, replace=False) if n_inj < n else np.arange(n)
             new = new.copy() if new.base is not None else new
-            new[where] = np.asarray(self.sampler(n_inj, self.rng), dtype=float)
+            draw = self.sampler if proposal is None else proposal.draw
+            new[where] = np.asarray(draw(n_inj, self.rng), dtype=float)
         self.particles = new
         self.log_weights = np.full(n, -np.log(n))
+        if n_inj > 0 and proposal is not None and proposal.log_weight is not None:      # importance weights
+            lw = np.zeros(n)
+            lw[where] = np.asarray(proposal.log_weight(new[where]), dtype=float)
+            self.log_weights = lw - _rs.logsumexp(lw)
         st.n_injected = n_inj
         st.resampled = True
         st.n_particles = n
-        st.n_eff = float(n)
+        weighed = n_inj > 0 and proposal is not None and proposal.log_weight is not None
+        st.n_eff = _ess(self.log_weights) if weighed else float(n)
 
     # ------------------------------------------------------------ changing the set (for the run's policies)
     def replace(self, particles: ArrayLike, log_weights: ArrayLike) -> None:

@@ -451,7 +451,7 @@ def localize_log(grid: OccupancyGrid, log, settings: RunSettings | None = None, 
                     snapshot_particles=snapshot_particles, odometry=odo, recovery_injection=s.recovery_injection,
                     restart_after=s.restart_after, expand=tuple(s.expand),
                     skip_unknown_beams=s.unknown_beams == "skip", skip_short_beams=s.skip_short_beams,
-                    state=s.state,
+                    state=s.state, sensor_reset=s.sensor_reset,
                     callback=None if progress is None else progress.update_to)
     return RunResult(times=np.asarray(log.times), trace=tr, odometry_check=sign_check)
 

@@ -18,6 +18,8 @@ each extra rule lives here, with its own tests (``tests/test_policies.py``):
   the current cloud, the two on probation until the scans pick one;
 * :class:`Redraw` -- every particle re-drawn when all got zero likelihood or
   left the map, and random particles injected while lost;
+* :class:`SensorReset` -- sensor resetting: while ``p_localized`` doubts the
+  place, part of the particles is drawn where the scan fits the map;
 * :class:`ThresholdState` -- the *searching* / *localized* / *lost* state from
   the thresholds of :class:`StateRules`.
 
@@ -43,6 +45,8 @@ from .evidence import expected_fit, free_share, pinned, scan_fit, unexplained_be
 from .geometry import mean_pose
 from .geometry import relative as _relative
 from .grid import OccupancyGrid
+from .mcl import Proposal
+from .placesearch import best_places, coarse_model
 from .reliability import LOST_BELOW
 
 __all__ = [
@@ -58,6 +62,7 @@ __all__ = [
     "Restart",
     "Probation",
     "Redraw",
+    "SensorReset",
     "ThresholdState",
     "PROBATION",
     "STATES",
@@ -192,7 +197,9 @@ class Step:
     ``z`` is the measurement the update used (None: no update); ``scan`` the
     range scan as given (``ranges``, ``angles``, ``valid``), for the evidence.
     ``cloud`` is the weighted set right after the update; ``n_eff`` the
-    effective sample size then.
+    effective sample size then. ``reset_share`` is the share of the particles
+    :class:`SensorReset` draws at this step's resampling, ``proposal`` its sampler of
+    poses where the scan fits (None: the filter's own sampler).
     """
 
     k: int
@@ -214,6 +221,8 @@ class Step:
     state: str = "searching"
     p_localized: float = float("nan")
     evidence: float = float("nan")
+    reset_share: float = 0.0
+    proposal: Any = None
 
     @property
     def updated(self) -> bool:
@@ -718,6 +727,116 @@ class Redraw:
     def searching(self, step: Step, ctx: Context) -> bool:
         """Whether the step resamples with injection because the filter is lost."""
         return ctx.state == "lost" and self.injection > 0 and step.updated
+
+
+class SensorReset:
+    """Sensor resetting (Lenser and Veloso 2000), weighed as a mixture proposal: in doubt, look where the scan fits.
+
+    At an update whose ``p_localized`` is below ``below`` (the state's
+    threshold for *lost*), the filter resamples, and the share
+    ``s = share * (1 - p_localized / below)`` of the new set is drawn near the
+    places where this scan fits the map best: the more doubt, the more
+    particles. Those places come from :func:`localize.placesearch.best_places`
+    (the scan scored over a lattice of the map's free space with a blurred
+    likelihood field, the best ``n_places`` distinct places climbed on the
+    sensor model); each is drawn equally often, spread by ``spread``
+    (metres, radians). The scan that found them does not weight them: the
+    next scans do, like any particle's.
+
+    Drawn particles are not equally weighted with the kept ones: they were
+    drawn from a proposal, and get importance weights, as the dual samples of
+    Mixture MCL do (Thrun, Fox, Burgard and Dellaert, *Robust Monte Carlo
+    localization for mobile robots*, Artificial Intelligence 128, 2001). With
+    ``p = p_localized``, the prior of the robot's pose is ``p`` times the old
+    belief plus ``1 - p`` times uniform over the free space ``u`` (the belief
+    is wrong: the robot may be anywhere). The set was drawn from ``1 - s``
+    times the old belief plus ``s`` times the places' mixture ``q``. Where the
+    old belief is nil, a drawn particle's weight against a kept one is then
+
+        ``(1 - p) u(x) (1 - s) / (p q(x) s)``
+
+    (``p`` no lower than 0.001). Where ``q`` is dense the weight is small: a
+    place that fits the scan is not made more probable by the draw, only
+    looked at. A look-alike of a place the filter believes gets a small
+    share, and loses it again unless the scans favour it; when the filter is
+    sure of nothing (``p`` near 0) the drawn particles weigh as much as the
+    kept ones.
+
+    ``p_localized`` is NaN without :class:`localize.reliability.ReliabilityState`:
+    then nothing is drawn.
+    """
+
+    def __init__(self, grid: OccupancyGrid, sensor: Any, share: float = 0.1, below: float = LOST_BELOW, *,
+                 n_places: int = 16, spread: tuple[float, float] = (0.1, 0.05), seed: int = 0) -> None:
+        if not 0.0 < float(share) < 1.0:
+            raise ValueError(f"share must be a fraction in (0, 1); got {share!r}")
+        self.grid, self.sensor = grid, sensor
+        self.share, self.below, self.n_places = float(share), float(below), int(n_places)
+        self.spread = np.array([spread[0], spread[0], spread[1]], dtype=float)
+        self.coarse = coarse_model(grid, sensor)
+        self.log_free_volume = float(np.log(max(np.count_nonzero(grid.free), 1) * grid.resolution ** 2 * 2 * np.pi))
+        self.rng = np.random.default_rng(seed)       # the lattice's offsets: the filter's stream is not touched
+        self.n_resets = 0
+
+    def share_at(self, step: Step) -> float:
+        """The share of the particles to draw at this step (0: none)."""
+        p = step.p_localized
+        if not (step.updated and is_scan(step.z) and np.isfinite(p) and p < self.below and step.n_valid > 0):
+            return 0.0
+        return self.share * (1.0 - p / self.below)
+
+    def propose(self, step: Step) -> None:
+        """Set the step's ``reset_share`` and ``proposal`` (a :class:`localize.mcl.Proposal`) for its
+        resampling; 0 and None: no reset."""
+        share = self.share_at(step)
+        places = self.places(step) if share > 0 else np.empty((0, 3))
+        if len(places) == 0:
+            step.reset_share, step.proposal = 0.0, None
+            return
+        self.n_resets += 1
+        step.reset_share = share
+        step.proposal = Proposal(self.near(places), self.log_weight(places, step.p_localized, share))
+
+    def places(self, step: Step) -> NDArray[np.float64]:
+        """Where the step's scan fits the map best, ``(k, 3)`` (k may be 0)."""
+        places, _ = best_places(self.grid, self.sensor, step.z, self.rng, coarse=self.coarse, n_best=self.n_places)
+        return places
+
+    def near(self, places: NDArray) -> Any:
+        """``draw(n, rng)``: ``n`` poses, each near one of ``places`` (equally often), spread by ``spread``."""
+        def draw(n: int, rng: np.random.Generator) -> NDArray[np.float64]:
+            at = places[rng.integers(len(places), size=n)]
+            out = at + rng.normal(size=(n, 3)) * self.spread
+            out[:, 2] = (out[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
+            return out
+
+        return draw
+
+    def log_q(self, places: NDArray, poses: NDArray) -> NDArray[np.float64]:
+        """Log density of :meth:`near`'s draws at ``poses`` (per square metre and radian)."""
+        d = np.asarray(poses, dtype=float)[:, None, :] - places[None, :, :]
+        d[..., 2] = (d[..., 2] + np.pi) % (2.0 * np.pi) - np.pi
+        log_n = -1.5 * np.log(2.0 * np.pi) - float(np.sum(np.log(self.spread)))
+        each = log_n - 0.5 * np.sum((d / self.spread) ** 2, axis=2)              # (n, places): one Gaussian each
+        top = each.max(axis=1)
+        return top + np.log(np.exp(each - top[:, None]).sum(axis=1)) - np.log(len(places))
+
+    def log_weight(self, places: NDArray, p: float, share: float) -> Any:
+        """``f(poses)``: the log importance weight of particles drawn near ``places`` against a kept particle's,
+        ``log((1 - p) u (1 - share) / (p q share))`` (see the class)."""
+        p = min(max(float(p), 1e-3), 1.0 - 1e-9)
+        const = np.log(1.0 - p) - self.log_free_volume + np.log(1.0 - share) - np.log(p) - np.log(share)
+
+        def f(poses: NDArray) -> NDArray[np.float64]:
+            return const - self.log_q(places, poses)
+
+        return f
+
+    def report(self, last: int, ctx: Context) -> None:
+        """How many resamplings drew particles where the scan fits (one event at the end)."""
+        if self.n_resets:
+            ctx.events.append((last, f"sensor resetting: at {self.n_resets} updates in doubt, part of the particles "
+                                     "was drawn where the scan fits the map"))
 
 
 # --------------------------------------------------------------------------- the state

@@ -37,6 +37,7 @@ from .policies import (
     OdometryCheck,
     Redraw,
     Restart,
+    SensorReset,
     StateRules,
     Step,
     ThresholdState,
@@ -204,6 +205,7 @@ class Policies:
     expansion: Expansion | None = None
     restart: Restart | None = None
     redraw: Redraw | None = None
+    reset: SensorReset | None = None
     state: ThresholdState | ReliabilityState | None = None
     ctx: Context = None  # type: ignore[assignment]
 
@@ -271,6 +273,8 @@ class Policies:
             ctx.fits.add(step.fit)
         if isinstance(self.state, ReliabilityState):
             step.p_localized = self.state.p_localized(step)      # "am I localized?": the evidence, weighed
+        if self.reset is not None:
+            self.reset.propose(step)                             # sensor resetting: in doubt, look where z fits
         if self.restart is not None and self.evidence is not None:
             self.restart.count(step, ctx, self.evidence, gathered)
         if self.expansion is not None and self.evidence is not None:
@@ -303,11 +307,15 @@ class Policies:
         return False
 
     def resample_anyway(self, step: Step) -> bool:
-        """Resample even with enough effective particles (to inject while lost)."""
-        return self.redraw is not None and self.redraw.searching(step, self.ctx)
+        """Resample even with enough effective particles (to inject while lost, or to reset while in doubt)."""
+        return (self.redraw is not None and self.redraw.searching(step, self.ctx)) or step.reset_share > 0
 
-    def injection(self, mcl: Any) -> float | None:
-        """The injected share at this resampling (None: the filter's own)."""
+    def injection(self, mcl: Any, step: Step | None = None) -> float | None:
+        """The injected share at this resampling (None: the filter's own): with sensor resetting the share
+        drawn from ``step.proposal`` (:class:`SensorReset`, whose importance weights are for that share),
+        else random particles while lost (:class:`Redraw`)."""
+        if step is not None and step.proposal is not None:
+            return step.reset_share
         if self.redraw is not None and self.ctx.state == "lost" and self.redraw.injection > 0 and mcl.sampler:
             return max(mcl.injection, self.redraw.injection)
         return None
@@ -322,7 +330,7 @@ class Policies:
 
     def close(self, last: int) -> None:
         """The run's totals into the events."""
-        for p in (self.expansion, self.beams):
+        for p in (self.expansion, self.beams, self.reset):
             if p is not None:
                 p.report(last, self.ctx)
 
@@ -359,7 +367,8 @@ def run(mcl: Any, n_steps: int, control: Callable[[int], Any], scan: Callable[[i
         p.assess(step, mcl)                                     # what the map says about the estimate
         if not p.intervene(step, mcl):                          # restart, redraw, probation
             if mcl.needs_resampling() or p.resample_anyway(step):
-                mcl.resample(injection=p.injection(mcl))        # lines 8-11: draw i with probability w_t[i]
+                mcl.resample(injection=p.injection(mcl, step),  # lines 8-11: draw i with probability w_t[i]
+                             proposal=step.proposal)            # (injected: where the scan fits, if reset)
         p.conclude(step)                                        # searching, localized or lost
         for watch in observers:
             watch(step, mcl)
@@ -442,7 +451,7 @@ def default_policies(mcl: Any, *, grid: OccupancyGrid | None = None, min_motion:
                      recovery_injection: float = 0.0, restart_after: int = 0,
                      expand: tuple[float, float] = (0.0, 0.0), odometry: ArrayLike | None = None,
                      skip_unknown_beams: bool = False, skip_short_beams: float = 0.0,
-                     state: str = "thresholds") -> Policies:
+                     state: str = "thresholds", sensor_reset: float = 0.0) -> Policies:
     """The policies :func:`run_filter` runs ``mcl`` with, from its arguments (see there).
 
     Examples
@@ -482,6 +491,10 @@ def default_policies(mcl: Any, *, grid: OccupancyGrid | None = None, min_motion:
                          "and log_likelihood: the probability is calibrated on them; use state='thresholds'")
     if state == "probability":
         p.state = ReliabilityState(grid, sensor, fit_distance=rules.fit_distance)
+        if sensor_reset > 0:
+            p.reset = SensorReset(grid, sensor, sensor_reset, p.state.lost_below)
+    elif sensor_reset > 0:
+        raise ValueError("sensor_reset needs state='probability': it draws particles while p_localized is low")
     else:
         p.state = ThresholdState(sensor, rules, p.evidence)
     return p
@@ -508,6 +521,7 @@ def run_filter(
     skip_unknown_beams: bool = False,
     skip_short_beams: float = 0.0,
     state: str = "thresholds",
+    sensor_reset: float = 0.0,
 ) -> RunTrace:
     """The one run driver: filter a sequence of controls and scans, with update gating and an honest state.
 
@@ -596,6 +610,13 @@ def run_filter(
         spread out (after a kidnapping): lost, it has already said that it
         does not know, and the probation keeps the old place if the search
         finds nothing better.
+    sensor_reset : float
+        Sensor resetting (Lenser and Veloso 2000; :class:`~localize.policies.SensorReset`),
+        with ``state="probability"`` only: at each update whose ``p_localized``
+        is below the state's threshold for *lost*, the filter resamples and up
+        to this share of the particles (in (0, 1); 0, default: never) is drawn
+        near the places where the scan fits the map best, the more the lower
+        ``p_localized``.
     expand : (metres, radians)
         Expansion resetting (Ueda et al. 2004): when the cloud has agreed on
         one place but the scan just used does not fit the map there (its fit
@@ -694,7 +715,7 @@ def run_filter(
     policies = default_policies(mcl, grid=grid, min_motion=min_motion, max_step=max_step, rules=rules,
                                 recover=recover, recovery_injection=recovery_injection, restart_after=restart_after,
                                 expand=expand, odometry=odometry, skip_unknown_beams=skip_unknown_beams,
-                                skip_short_beams=skip_short_beams, state=state)
+                                skip_short_beams=skip_short_beams, state=state, sensor_reset=sensor_reset)
     record = Recorder(snapshot_steps, snapshot_particles)
     watch = [record] if callback is None else [record, lambda step, mcl: callback(step.k + 1)]
     t0 = time.perf_counter()

@@ -301,6 +301,13 @@ class RunSettings:
         old cloud and the new search then run side by side for up to 30 updates; the new one replaces the old
         place only if it wins both the sensor model's weight and the ray-cast fit of the scans, and fits them
         acceptably (default {default}; 0 never). Example: --restart-after 5""")
+    sensor_reset: float = setting(
+        0.0, "sensor resetting: while p_localized is low, draw up to this share of particles where the scan fits",
+        _fraction, unit="fraction", valid="[0, 1)", metavar="F", cli_help="""
+        sensor resetting (Lenser and Veloso 2000), with --state probability: at each update at which
+        p_localized is below 0.7, the filter resamples and up to the share F of its particles is drawn near the
+        places where the scan fits the map best (F times 1 - p_localized / 0.7: the more doubt, the more); the
+        next scans weigh them like any other particle (default {default}; 0 never). Example: --sensor-reset 0.1""")
     min_ess: float = setting(
         0.0, "adaptive tempering: no update leaves fewer than min_ess * N effective particles (0: off)",
         check_nonnegative, unit="fraction of N", valid=">= 0", metavar="F", cli_help="""
@@ -415,6 +422,9 @@ class RunSettings:
         if lo is not None and hi is not None and not lo < hi:
             raise ValueError(f"min_range (--min-range) {lo:g} m must be below max_range (--max-range) {hi:g} m: "
                              "readings between the two are the scan's evidence")
+        if self.sensor_reset > 0 and self.state != "probability":
+            raise ValueError(f"sensor_reset (--sensor-reset) {self.sensor_reset:g} needs state (--state) probability, "
+                             f"not {self.state}: it draws particles while p_localized is low")
 
     def summary(self) -> dict:
         """The command-line settings (flag order) as ``summary.json`` lists them: tuples as lists.
@@ -534,6 +544,7 @@ CLI_GROUPS: dict[str, tuple[str, str]] = {
     "augmented": ("recovery", "augmented MCL rates (0 0: off)"),
     "recovery_injection": ("recovery", "while lost: random particles"),
     "restart_after": ("recovery", "search again after K updates in doubt (0: no)"),
+    "sensor_reset": ("recovery", "while in doubt: draw where the scan fits"),
     "min_ess": ("filter", "keep F*N effective particles (0: off)"),
     "expand": ("recovery", "spread the cloud on misfit"),
     "unknown_beams": ("sensor", "unknown-cell beams: skip, score"),

@@ -6,7 +6,7 @@ import pytest
 from localize.estimate import Estimate
 from localize.grid import OccupancyGrid
 from localize.maps import office
-from localize.mcl import MCL
+from localize.mcl import MCL, Proposal
 from localize.motion import odometry_pair
 from localize.policies import (
     BeamMasks,
@@ -19,11 +19,13 @@ from localize.policies import (
     Probation,
     Redraw,
     Restart,
+    SensorReset,
     StateRules,
     Step,
     ThresholdState,
 )
 from localize.raycast import RayCaster
+from localize.sensors import LikelihoodField
 
 ANGLES = np.linspace(-np.pi / 2, np.pi / 2, 19)
 POSE = np.array([3.0, 3.0, 0.5])
@@ -251,6 +253,99 @@ def test_redraw_re_draws_a_failed_cloud_and_injects_only_while_lost():
     assert not redraw.searching(used, ctx)
     ctx.state = "lost"
     assert redraw.searching(used, ctx) and not redraw.searching(Step(6), ctx)     # only with an update
+
+
+def _lidar_step(truth, p_localized, grid=None):
+    """A step whose 90-beam, 360-degree scan was taken at ``truth`` in the office, weighed with ``p_localized``."""
+    g = office() if grid is None else grid
+    angles = np.linspace(-np.pi, np.pi, 90, endpoint=False)
+    r = RayCaster(g, 8.0, method="exact").cast(np.asarray(truth, dtype=float)[None], angles)[0]
+    valid = r < 8.0
+    return Step(7, z=(r, angles), scan=(r, angles, valid), n_valid=int(valid.sum()), p_localized=p_localized)
+
+
+def test_sensor_reset_draws_more_the_more_the_filter_doubts_and_nothing_without_doubt():
+    reset = SensorReset(office(), LikelihoodField(office(), 8.0, sigma_hit=0.1), share=0.2, below=0.7)
+    shares = [reset.share_at(_lidar_step(POSE, p)) for p in (0.0, 0.35, 0.7, 0.95, float("nan"))]
+    assert shares == pytest.approx([0.2, 0.1, 0.0, 0.0, 0.0])
+    unused = _lidar_step(POSE, 0.0)
+    unused.z = None                                  # the motion gate kept the scan out: no evidence, no reset
+    assert reset.share_at(unused) == 0.0
+    dead = _lidar_step(POSE, 0.0)
+    dead.n_valid = 0
+    assert reset.share_at(dead) == 0.0
+    calm, doubt = _lidar_step(POSE, 0.9), _lidar_step(POSE, 0.0)
+    reset.propose(calm)
+    reset.propose(doubt)
+    assert calm.proposal is None and calm.reset_share == 0.0           # the filter's own sampler, no reset
+    assert isinstance(doubt.proposal, Proposal) and doubt.reset_share == pytest.approx(0.2)
+    with pytest.raises(ValueError, match="share"):
+        SensorReset(office(), Flat(), share=1.0)
+
+
+def test_sensor_reset_draws_near_the_places_where_the_scan_fits():
+    """Where the scan fits best is where it was taken (a 360-degree scan in the office); draws go near the places."""
+    g = office()
+    lf = LikelihoodField(g, 8.0, sigma_hit=0.1)
+    truth = np.array([6.0, 4.0, 1.0])
+    reset = SensorReset(g, lf, share=0.1, n_places=8, spread=(0.1, 0.05), seed=1)
+    step = _lidar_step(truth, 0.0, g)
+    places = reset.places(step)
+    assert 1 <= len(places) <= 8
+    assert np.hypot(*(places[0, :2] - truth[:2])) < 0.3          # the best place is the robot's
+    n = 800
+    poses = reset.near(places)(n, np.random.default_rng(0))
+    assert poses.shape == (n, 3) and np.all(np.abs(poses[:, 2]) <= np.pi)
+    # every draw lies near one of the places: 0.1 m of spread per axis, so 4.5 sd is 0.64 m in the plane
+    d = np.hypot(*(poses[:, None, :2] - places[None, :, :2]).transpose(2, 0, 1)).min(axis=1)
+    assert d.max() < 1.0
+    # each place is drawn equally often: near the robot about n / len(places); 5 binomial sd below that is a fail
+    near = int(np.sum(np.hypot(*(poses[:, :2] - truth[:2]).T) < 0.5))
+    k = len(places)
+    assert near >= n / k - 5 * np.sqrt(n * (1 / k) * (1 - 1 / k))
+    step.p_localized = 0.0
+    reset.propose(step)
+    assert step.proposal is not None and reset.n_resets == 1      # counted for the run's report
+
+
+def test_sensor_reset_injects_through_the_resampling_with_its_own_sampler():
+    g = office()
+    f = MCL.gaussian(POSE, (0.05, 0.05, 0.05), 1000, (0.0,) * 4, Flat(), rng=np.random.default_rng(2), grid=g)
+    far = np.array([[20.0, 2.0, 0.0]])
+    f.resample(injection=0.25, proposal=Proposal(lambda n, rng: np.repeat(far, n, axis=0)))
+    at_far = np.all(f.particles == far, axis=1)
+    assert f.status.n_injected == 250 and int(at_far.sum()) == 250
+    assert np.allclose(f.weights, 1e-3)                     # no log_weight: weighed alike
+    f.resample(injection=0.25)                              # the proposal is for that one call: uniform again
+    assert int(np.all(f.particles == far, axis=1).sum()) < 250
+    f = MCL.gaussian(POSE, (0.05, 0.05, 0.05), 1000, (0.0,) * 4, Flat(), rng=np.random.default_rng(2), grid=g)
+    f.resample(injection=0.25, proposal=Proposal(lambda n, rng: np.repeat(far, n, axis=0),
+                                                 lambda x: np.full(len(x), np.log(3.0))))
+    at_far = np.all(f.particles == far, axis=1)
+    assert f.weights[at_far].sum() == pytest.approx(0.5)    # 250 drawn at 3 times the weight of 750 kept
+    assert f.status.n_eff == pytest.approx(1.0 / np.sum(f.weights ** 2))
+
+
+def test_sensor_reset_weighs_its_draws_as_a_uniform_prior_over_the_free_space_would():
+    """Importance weights: the draws near the places, weighed, estimate the mass the prior's uniform part puts
+    anywhere, ``(1 - p) (1 - s) / (p s)`` times the region's share of the free space's volume (against a kept
+    particle's weight). Checked on a box about one place, to 5 standard errors of 40,000 draws."""
+    g = office()
+    reset = SensorReset(g, Flat(), share=0.1, spread=(0.1, 0.05))
+    places = np.array([[3.0, 3.0, 0.5], [6.0, 4.0, -2.0], [3.1, 3.0, 0.6]])
+    p, s = 0.3, 0.08
+    draws = reset.near(places)(40_000, np.random.default_rng(5))
+    w = np.exp(reset.log_weight(places, p, s)(draws))
+    half = np.array([0.25, 0.25, 0.15])                      # a box about the first place (it holds the third too)
+    inside = np.all(np.abs(draws - places[0]) < half, axis=1)
+    volume = float(np.prod(2 * half))
+    free_volume = np.count_nonzero(g.free) * g.resolution ** 2 * 2 * np.pi
+    expected = (1 - p) * (1 - s) / (p * s) * volume / free_volume
+    values = w * inside
+    assert values.mean() == pytest.approx(expected, abs=5 * values.std() / np.sqrt(values.size))
+    # the density q: three places, so a pose at the second (alone) has a third of one Gaussian's peak density
+    peak = 1.0 / ((2 * np.pi) ** 1.5 * 0.1 * 0.1 * 0.05)
+    assert reset.log_q(places, places[1:2])[0] == pytest.approx(np.log(peak / 3), rel=1e-9)
 
 
 def test_mcl_takes_injection_and_soft_obstacles_for_one_call_only():

@@ -73,7 +73,8 @@ def test_settings_are_frozen_and_checked_when_made():
                             (dict(particles="many"), "particles must be a whole number >= 1 or 'auto'"),
                             (dict(occupied_penalty=-1), "occupied_penalty must be a finite number of nats > 0 or 'inf'"),
                             (dict(recovery_injection=1.0), r"recovery_injection must be a fraction in \[0, 1\)"),
-                            (dict(track="yes"), "track must be True or False")]:
+                            (dict(track="yes"), "track must be True or False"),
+                            (dict(sensor_reset=0.1, state="thresholds"), "sensor_reset .* needs state .* probability")]:
         with pytest.raises((ValueError, TypeError), match=message):
             dataclasses.replace(s, **change)
     assert RunSettings(occupied_penalty="inf").occupied_penalty == np.inf
@@ -82,7 +83,7 @@ def test_settings_are_frozen_and_checked_when_made():
 #: A value each numeric setting refuses.
 BAD = {"particles": "0", "beams": "0", "max_range": "-1", "alphas": "-0.1", "sigma_hit": "0", "z_short": "1.5",
        "temper": "2", "min_motion": "-1", "injection": "1", "min_range": "-0.5", "kld": "-1", "min_particles": "0",
-       "augmented": "-1", "recovery_injection": "1", "restart_after": "-2", "min_ess": "-1", "expand": "-1",
+       "augmented": "-1", "recovery_injection": "1", "restart_after": "-2", "min_ess": "-1", "expand": "-1", "sensor_reset": "1",
        "skip_short_beams": "-1", "occupied_penalty": "0"}
 
 
