@@ -198,8 +198,8 @@ class Step:
     range scan as given (``ranges``, ``angles``, ``valid``), for the evidence.
     ``cloud`` is the weighted set right after the update; ``n_eff`` the
     effective sample size then. ``reset_share`` is the share of the particles
-    :class:`SensorReset` draws at this step's resampling, ``proposal`` its sampler of
-    poses where the scan fits (None: the filter's own sampler).
+    :class:`SensorReset` draws at this step's resampling, ``proposal`` where it
+    draws them and what they weigh (a :class:`localize.mcl.Proposal`; None: no reset).
     """
 
     k: int
@@ -764,6 +764,13 @@ class SensorReset:
 
     ``p_localized`` is NaN without :class:`localize.reliability.ReliabilityState`:
     then nothing is drawn.
+
+    An expert setting, not the default (``localize run --sensor-reset``;
+    ``benchmarks/RESULTS.md``, ``bench_global_experiments_stop56``): in place of
+    the restarts (:class:`Restart`) it finds more robots on generated buildings
+    and finds a kidnapped one sooner, but the state's wrong claims there do not
+    fall, and on the demo they rise: every place it finds is one more place the
+    rival bank can switch the cloud onto.
     """
 
     def __init__(self, grid: OccupancyGrid, sensor: Any, share: float = 0.1, below: float = LOST_BELOW, *,

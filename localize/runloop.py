@@ -616,7 +616,8 @@ def run_filter(
         is below the state's threshold for *lost*, the filter resamples and up
         to this share of the particles (in (0, 1); 0, default: never) is drawn
         near the places where the scan fits the map best, the more the lower
-        ``p_localized``.
+        ``p_localized``, with importance weights (a robot that may be anywhere
+        with probability ``1 - p_localized``).
     expand : (metres, radians)
         Expansion resetting (Ueda et al. 2004): when the cloud has agreed on
         one place but the scan just used does not fit the map there (its fit

@@ -306,8 +306,11 @@ class RunSettings:
         _fraction, unit="fraction", valid="[0, 1)", metavar="F", cli_help="""
         sensor resetting (Lenser and Veloso 2000), with --state probability: at each update at which
         p_localized is below 0.7, the filter resamples and up to the share F of its particles is drawn near the
-        places where the scan fits the map best (F times 1 - p_localized / 0.7: the more doubt, the more); the
-        next scans weigh them like any other particle (default {default}; 0 never). Example: --sensor-reset 0.1""")
+        places where the scan fits the map best (F times 1 - p_localized / 0.7: the more doubt, the more), each
+        with the importance weight of a robot that may be anywhere (with probability 1 - p_localized), so a
+        look-alike of the believed place is looked at, not made more probable; the next scans decide. An
+        expert setting: beside --restart-after 0 it finds more robots on generated buildings, but not on the
+        demo (default {default}; 0 never). Example: --sensor-reset 0.1 --restart-after 0""")
     min_ess: float = setting(
         0.0, "adaptive tempering: no update leaves fewer than min_ess * N effective particles (0: off)",
         check_nonnegative, unit="fraction of N", valid=">= 0", metavar="F", cli_help="""
