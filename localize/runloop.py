@@ -483,21 +483,26 @@ def default_policies(mcl: Any, *, grid: OccupancyGrid | None = None, min_motion:
             p.expansion = Expansion((ex_xy, ex_th))
         if restart_after:
             p.restart = Restart(restart_after, mcl.kld.n_max if mcl.kld is not None else mcl.n)
+    _add_state(p, grid, sensor, state, sensor_reset)
+    return p
+
+
+def _add_state(p: Policies, grid: OccupancyGrid | None, sensor: Any, state: str, sensor_reset: float) -> None:
+    """The state's policy (and sensor resetting, which reads its ``p_localized``) into ``p``."""
     if state not in ("thresholds", "probability"):
         raise ValueError(f"state must be 'thresholds' or 'probability'; got {state!r}")
     if state == "probability" and (p.evidence is None or not callable(getattr(sensor, "log_likelihood", None))
                                    or not np.isfinite(float(getattr(sensor, "max_range", np.inf)))):
         raise ValueError("state='probability' needs a map (grid) and a range sensor model with a finite max_range "
                          "and log_likelihood: the probability is calibrated on them; use state='thresholds'")
-    if state == "probability":
-        p.state = ReliabilityState(grid, sensor, fit_distance=rules.fit_distance)
+    if state == "thresholds":
         if sensor_reset > 0:
-            p.reset = SensorReset(grid, sensor, sensor_reset, p.state.lost_below)
-    elif sensor_reset > 0:
-        raise ValueError("sensor_reset needs state='probability': it draws particles while p_localized is low")
-    else:
-        p.state = ThresholdState(sensor, rules, p.evidence)
-    return p
+            raise ValueError("sensor_reset needs state='probability': it draws particles while p_localized is low")
+        p.state = ThresholdState(sensor, p.rules, p.evidence)
+        return
+    p.state = ReliabilityState(grid, sensor, fit_distance=p.rules.fit_distance)
+    if sensor_reset > 0:
+        p.reset = SensorReset(grid, sensor, sensor_reset, p.state.lost_below)
 
 
 def run_filter(
