@@ -130,11 +130,12 @@ print(signature.rstrip() + "\n    ..." + rest.partition('"""')[2])
 #   becomes one pose).
 # * `mcl.needs_resampling()` and `mcl.resample(...)` are lines 8–11: draw a new
 #   set with probability proportional to the weights, here only when the
-#   effective sample size has fallen (PR section 4.2.4). Its two arguments
-#   belong to recovery policies: the share of the new set to draw afresh
-#   (`p.injection`), and where to draw it (`step.proposal`, set only by
-#   sensor resetting; `None` draws uniformly over the map). Without policies
-#   neither draws anything.
+#   effective sample size has fallen (PR section 4.2.4). Both arguments of
+#   `resample` belong to recovery policies: the share of the new set to draw
+#   afresh (`p.injection`), and where to draw it (`step.proposal`, set only
+#   by sensor resetting; `None` draws uniformly over the free space). Without
+#   policies both are `None`, and the filter's own `injection` (0 unless you
+#   set one) decides.
 #
 # Everything written `p.something` is a **policy**: a rule beyond the textbook
 # that a real robot needs, each a small object of `localize.policies` with its
