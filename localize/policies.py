@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import resample as _rs
 from .estimate import Estimate, _estimate
 from .evidence import expected_fit, free_share, pinned, scan_fit, unexplained_beams
-from .geometry import mean_pose
+from .geometry import mean_pose, wrap_angle
 from .geometry import relative as _relative
 from .grid import OccupancyGrid
 from .mcl import Proposal
@@ -774,13 +774,14 @@ class SensorReset:
     """
 
     def __init__(self, grid: OccupancyGrid, sensor: Any, share: float = 0.1, below: float = LOST_BELOW, *,
-                 n_places: int = 16, spread: tuple[float, float] = (0.1, 0.05), seed: int = 0) -> None:
+                 n_places: int = 16, spread: tuple[float, float] = (0.1, 0.05), seed: int = 0,
+                 coarse: Any = None) -> None:
         if not 0.0 < float(share) < 1.0:
             raise ValueError(f"share must be a fraction in (0, 1); got {share!r}")
         self.grid, self.sensor = grid, sensor
         self.share, self.below, self.n_places = float(share), float(below), int(n_places)
         self.spread = np.array([spread[0], spread[0], spread[1]], dtype=float)
-        self.coarse = coarse_model(grid, sensor)
+        self.coarse = coarse_model(grid, sensor) if coarse is None else coarse    # the rival bank's, when given
         self.log_free_volume = float(np.log(max(np.count_nonzero(grid.free), 1) * grid.resolution ** 2 * 2 * np.pi))
         self.rng = np.random.default_rng(seed)       # the lattice's offsets: the filter's stream is not touched
         self.n_resets = 0
@@ -814,7 +815,7 @@ class SensorReset:
         def draw(n: int, rng: np.random.Generator) -> NDArray[np.float64]:
             at = places[rng.integers(len(places), size=n)]
             out = at + rng.normal(size=(n, 3)) * self.spread
-            out[:, 2] = (out[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
+            out[:, 2] = wrap_angle(out[:, 2])
             return out
 
         return draw
@@ -822,7 +823,7 @@ class SensorReset:
     def log_q(self, places: NDArray, poses: NDArray) -> NDArray[np.float64]:
         """Log density of :meth:`near`'s draws at ``poses`` (per square metre and radian)."""
         d = np.asarray(poses, dtype=float)[:, None, :] - places[None, :, :]
-        d[..., 2] = (d[..., 2] + np.pi) % (2.0 * np.pi) - np.pi
+        d[..., 2] = wrap_angle(d[..., 2], exact=False)                   # inside a density: the fast wrap
         log_n = -1.5 * np.log(2.0 * np.pi) - float(np.sum(np.log(self.spread)))
         each = log_n - 0.5 * np.sum((d / self.spread) ** 2, axis=2)              # (n, places): one Gaussian each
         top = each.max(axis=1)

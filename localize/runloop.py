@@ -502,7 +502,9 @@ def _add_state(p: Policies, grid: OccupancyGrid | None, sensor: Any, state: str,
         return
     p.state = ReliabilityState(grid, sensor, fit_distance=p.rules.fit_distance)
     if sensor_reset > 0:
-        p.reset = SensorReset(grid, sensor, sensor_reset, p.state.lost_below)
+        bank = p.state.rivals                   # the same map and sensor: its blurred field serves the place search
+        p.reset = SensorReset(grid, sensor, sensor_reset, p.state.lost_below,
+                              coarse=None if bank is None else bank.coarse)
 
 
 def run_filter(
