@@ -63,6 +63,14 @@ it rigidly and are re-placed only every few scans, so a rival on the robot's
 place but a few centimetres off it loses nats at most scans
 (``tests/test_rivals.py``, a strict xfail), and it counts two poses less than
 a metre apart as one place whatever their headings.
+Measured against the truth (``benchmarks/why_wrong.py``,
+``bench_global_experiments_stop57``), most of those wrong claims rest on scans
+that barely tell the two places apart (a few nats over tens of scans, either
+way): a bank that held the robot's place and weighed it as fairly as the
+estimate would leave *localized* possible at about a fifth of them (draw 0:
+117 of 537). In the demo's office it is the other way: at 65 of its 73 wrong
+claims the robot's true path fits the scans worse than the estimate under the
+filter's own sensor model, and no bank can help there.
 
 This follows the reliability estimation of Akai et al. (*Reliable Monte Carlo
 localization for mobile robots*, 2023; als_ros), where a classifier's output
