@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import sys
 import time
 from pathlib import Path
 from typing import Callable
@@ -33,6 +34,10 @@ def run_jobs(run_one: Callable[[dict], dict], jobs: list[dict], workers: int = 2
              json_path: Path | None = None) -> list[dict]:
     """``run_one`` on every job, in ``workers`` forked processes when more than one; the rows in the order they
     finish, each also appended to ``json_path`` (JSON lines) at once, so that a run cut short keeps what it did."""
+    import localize
+
+    # which checkout is measured: each script puts its own first on the path, before PYTHONPATH
+    print(f"measuring localize {localize.__version__} from {Path(localize.__file__).parent}", file=sys.stderr)
     rows: list[dict] = []
     sink = open(json_path, "w") if json_path else None
 
