@@ -635,12 +635,16 @@ if speed:
         if line.startswith("|") and len(cells) > 7 and cells[1] == "defaults":
             factors[cells[0]] = float(cells[7].rstrip("x"))
     print(f"defaults: {factors['1000']:.0f}x real time with 1,000 particles, {factors['10000']:.0f}x with 10,000")
-    assert factors["1000"] > 100 and factors["10000"] > 1, factors
+    assert 1 < factors["1000"] < 20 and factors["10000"] > 1, factors
 
 # %% [markdown]
-# With 1,000 particles a run is more than a hundred times faster than the robot
-# drove, and with 10,000 still faster than real time: the command line keeps up
-# with a robot with a large margin. (The global localization of the chapter
+# With either cloud the command runs several times faster than the robot
+# drove, so it keeps up with a robot, but with 1,000 particles it is short of
+# the ten times real time the project aims at, and the size of the cloud hardly
+# matters. Most of the time is not the particle filter but the answer to "am I
+# localized?": the rival bank of chapter 8 searches the whole map for
+# look-alike places every few scans (a profile is in `benchmarks/RESULTS.md`,
+# `bench_global_experiments_stop58`). (The global localization of the chapter
 # starts with tens of thousands of particles, `--particles auto`, and is slower
 # for its first scans, until KLD-sampling has shrunk the cloud.)
 
