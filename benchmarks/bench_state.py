@@ -138,10 +138,16 @@ def prepare(job: dict):
     return grid, run.to_log()
 
 
+def run_settings(job: dict, grid) -> settings.RunSettings:
+    """The settings of ``localize run`` for a job: the defaults, its ``--state`` and options, particles resolved on
+    ``grid`` (also :mod:`why_wrong`'s, so that its runs are this benchmark's)."""
+    s = settings.parse_options(["--state", job["state"], *job.get("args", [])])
+    return replace(s, particles=pipeline.resolve_particles(s.particles, grid))
+
+
 def run_one(job: dict) -> dict:
     grid, log = prepare(job)
-    s = settings.parse_options(["--state", job["state"], *job.get("args", [])])
-    s = replace(s, particles=pipeline.resolve_particles(s.particles, grid))
+    s = run_settings(job, grid)
     t0 = time.perf_counter()
     res = pipeline.localize_log(grid, log, rng=np.random.default_rng(job["seed"]), settings=s)
     wall = time.perf_counter() - t0

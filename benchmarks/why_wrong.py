@@ -38,7 +38,6 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +50,7 @@ import bench_global as bg  # noqa: E402
 import bench_state as bs  # noqa: E402
 from _util import run_jobs, table  # noqa: E402
 
-from localize import pipeline, settings  # noqa: E402
+from localize import pipeline  # noqa: E402
 from localize import reliability as rel  # noqa: E402
 from localize.placesearch import climb, stencil  # noqa: E402
 
@@ -142,8 +141,7 @@ def classify(rows: dict, errors: np.ndarray, state: np.ndarray, off: float = bg.
 
 def run_state_job(job: dict) -> dict:
     grid, log = bs.prepare(job)
-    s = settings.parse_options(["--state", "probability", *job.get("args", [])])
-    s = replace(s, particles=pipeline.resolve_particles(s.particles, grid))
+    s = bs.run_settings(job, grid)
     with Recorder(log.poses) as rec:
         res = pipeline.localize_log(grid, log, rng=np.random.default_rng(job["seed"]), settings=s)
     j = bg.judge(res.estimates, log.poses)
