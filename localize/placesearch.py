@@ -10,7 +10,10 @@ such places in two stages:
 1. **Search**: the scan is scored by a *blurred* likelihood field
    (:func:`coarse_model`, end points blurred by :data:`COARSE_SIGMA`) at every
    free position of a lattice ``2 * COARSE_SIGMA`` apart (:func:`lattice`,
-   randomly shifted at each call) x :data:`COARSE_HEADINGS` headings. The
+   randomly shifted at each call, each position moved to its map cell's
+   centre) x :data:`COARSE_HEADINGS` headings: the scan is rotated once per
+   heading and slid from cell to cell
+   (:meth:`localize.sensors.LikelihoodField.log_likelihood_at_cells`). The
    filter's own sensor model is far too peaked to be searched on a coarse
    grid: the grid pose nearest the robot may be 0.4 m and 5 degrees off and
    score tens of nats below a look-alike that happens to lie on the grid.
@@ -160,6 +163,13 @@ def distinct(cand: NDArray, order: ArrayLike, n: int, spacing: float, heading: f
     return kept
 
 
+def _best_first(ll: NDArray, k: int) -> NDArray[np.intp]:
+    """Indices of the ``k`` largest entries of ``ll``, largest first (a partial sort)."""
+    k = min(int(k), len(ll))
+    top = np.argpartition(ll, len(ll) - k)[len(ll) - k:] if k < len(ll) else np.arange(len(ll))
+    return top[np.argsort(ll[top])[::-1]]
+
+
 def best_places(grid: OccupancyGrid, sensor: Any, z: tuple, rng: np.random.Generator, *,
                 coarse: LikelihoodField | None = None, n_best: int = 16,
                 away_from: NDArray | None = None, radius: float = 0.0) -> tuple[NDArray, NDArray]:
@@ -196,14 +206,21 @@ def best_places(grid: OccupancyGrid, sensor: Any, z: tuple, rng: np.random.Gener
             return np.ones(len(p), dtype=bool)
         return np.hypot(*(p[:, :2] - np.asarray(away_from, dtype=float)[:2]).T) >= radius
 
-    xy = lattice(grid, spacing, rng)
+    cells = coarse.grid.world_to_cell(lattice(grid, spacing, rng))
+    xy = coarse.grid.cell_to_world(cells)                 # each lattice position moved to its cell's centre
     th = rng.uniform(-np.pi, np.pi) + step * np.arange(COARSE_HEADINGS)
-    cand = np.column_stack([np.repeat(xy, COARSE_HEADINGS, axis=0), np.tile(th, len(xy))])
-    cand = cand[allowed(cand)]
-    if len(cand) == 0:
+    ok = allowed(xy)
+    cells, xy = cells[ok], xy[ok]
+    if len(xy) == 0:
         return np.empty((0, 3)), np.empty(0)
-    ll = scores(coarse, cand, z)
-    best = cand[distinct(cand, np.argsort(ll)[::-1], n_best, spacing)]      # the best few lattice poses: one place
+    ll = coarse.log_likelihood_at_cells(cells, th, *z).ravel()     # position by position, each heading
+    for k in (64 * n_best, len(ll)):        # the best first; all of them if too few distinct places are among those
+        order = _best_first(ll, k)
+        cand = np.column_stack([xy[order // COARSE_HEADINGS], th[order % COARSE_HEADINGS]])
+        kept = distinct(cand, range(len(cand)), n_best, spacing)
+        if len(kept) == n_best or len(order) == len(ll):
+            break
+    best = cand[kept]                                      # the best few lattice poses: one place each
     places, p_ll = climb(sensor, best, z, stencil(0.5 * spacing, 0.5 * step, 6))
     ok = allowed(places)
     places, p_ll = places[ok], p_ll[ok]
