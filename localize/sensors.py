@@ -1108,7 +1108,7 @@ class LikelihoodField:
         inv = 1.0 / g.resolution
         ox, oy, oth = self.sensor_offset
         base = ((cells[:, 0] + self._pad) * self._wp + cells[:, 1] + self._pad).astype(np.intp)
-        floor = self.short_floor(z)[:, None] if self.z_short > 0 else None
+        floor = self.short_floor(z).astype(np.float32).astype(float)[:, None] if self.z_short > 0 else None
         for k, t in enumerate(th):
             c, s = math.cos(t), math.sin(t)
             dx = (c * ox - s * oy + z * np.cos(t + oth + a)) * inv     # end points from the robot, in cells
