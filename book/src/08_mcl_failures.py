@@ -711,11 +711,11 @@ assert 0.7 < np.mean(rights[sure]) < 0.99                           # "sure" is 
 # Every robot is called *localized* while more than a metre off only in
 # the first steps after the kidnapping: a belief built on many good scans
 # gives way only after a few poor ones, the arithmetic above. None of them
-# settles on a look-alike room and calls it sure: where the search after the
-# kidnapping lands on a place whose scans fit about as well as the true one,
-# the rival bank holds the true place as a rival and moves the cloud there
-# once the scans tell the two apart (the lines above name the robots and the
-# steps). What the probability still gets wrong is
+# settles on a look-alike room and calls it sure. Had the search after the
+# kidnapping landed on a place whose scans fit about as well as the true one,
+# the rival bank would have held the true place as a rival and moved the
+# cloud there once the scans told the two apart (a line above would say at
+# which step; exercise 5 shows it happen). What the probability still gets wrong is
 # named by the state tests of `tests/test_state_scenarios.py` (in a long
 # featureless corridor, four rivals are not the corridor's continuum of
 # look-alikes) and measured on real logs and maps that none of this was
@@ -889,11 +889,11 @@ for bank in (True, False):
     print(f"bank {'on ' if bank else 'off'}: moved at step {moves or 'never'}; p_localized before: "
           f"{np.round(tr5.p_localized[:moves[0] + 1], 2).tolist() if moves else '-'}; "
           f"end: {tr5.state[-1]}, {e5[-1]:.1f} m off")
-# With the bank the filter doubts at first (the mirror image and the robot's place fit the first scans alike, so
-# the estimate's share is near a half), but not for long: from the fourth step p_localized says 0.99-1.0 at the
-# mirror image, metres off, until the box comes into view, the robot's place wins and the cloud moves. The bank
-# held the robot's place as a rival from the first step, but a few decimetres from the robot (its small moves and
-# hill climbs did not reach it), where the scans fit worse than at the mirror image, on which the cloud sat
-# exactly: the state said "localized" at the mirror image, wrongly (a failure issue 43 still tracks).
+# With the bank the filter doubts at first: the mirror image and the robot's place fit the first scans alike, so
+# the estimate's share is near a half. It rises to 0.92 at the fourth step, never to the 0.95 of *localized*, and
+# falls as the box comes into view: the robot's place wins and the cloud moves there. Whether it stays below 0.95
+# depends on how close the bank's rival is to the robot's place: a rival a few centimetres off loses nats at every
+# scan, and then the state can say "localized" at the mirror image, metres off (the strict xfail of
+# `tests/test_rivals.py`, a failure issue 43 still tracks).
 # Without the bank the cloud never leaves the mirror image, and the state ends "localized", metres off: a filter
 # cannot weigh a place it does not hold (deprivation, the first failure of this chapter).
