@@ -1,0 +1,119 @@
+"""The place search (``localize.placesearch.best_places``): does it find the robot's place, and how fast?
+
+The rival bank and sensor resetting ask the search, every few scans, where in
+the whole map one scan fits best. Two things matter: **recall** (is the
+robot's own place among the ``n_best`` places found, within 0.3 m and 0.1 rad,
+and is it the first?) and **time per search**. Both are measured on buildings
+no default was chosen on: ``bench_state.py``'s four kinds of building and four
+lasers (a building drawn from its own seed, 25 poses each, scans ray-cast with
+2 cm noise), and, for time, ``bench_cli.py``'s 800 x 800-cell map with its
+30 m laser. The sensor model is the command line's default likelihood field
+(30 beams, ``sigma_hit`` 0.2, ``z_short`` 0.2, ``temper`` 0.3).
+
+    python benchmarks/bench_placesearch.py [--write]
+
+To compare two versions of the search, run each checkout's own copy of this
+script: it measures the ``localize`` beside it (printed on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(HERE))
+
+import bench_global as bg  # noqa: E402
+import bench_state as bs  # noqa: E402
+
+import localize  # noqa: E402
+from localize import maps  # noqa: E402
+from localize.placesearch import best_places, coarse_model  # noqa: E402
+from localize.raycast import RayCaster  # noqa: E402
+from localize.sensors import LikelihoodField  # noqa: E402
+
+POSES = 25
+N_BEST = 16
+
+
+def _model(grid, max_range: float) -> LikelihoodField:
+    return LikelihoodField(grid, max_range, sigma_hit=0.2, max_beams=30, z_short=0.2, temper=0.3)
+
+
+def _angles(n_beams: int, fov: float) -> np.ndarray:
+    half = np.radians(fov) / 2.0
+    return np.linspace(-half, half, n_beams) if fov < 360.0 else np.linspace(-np.pi, np.pi, n_beams, endpoint=False)
+
+
+def _search(grid, lf, coarse, truths, angles, rng) -> tuple[int, int, float]:
+    """``(found among n_best, found first, seconds of search)`` over the poses ``truths``."""
+    caster = RayCaster(grid, lf.max_range)
+    found = first = 0
+    seconds = 0.0
+    for i, x in enumerate(truths):
+        z = np.clip(caster.cast(x[None], angles)[0] + rng.normal(0.0, 0.02, len(angles)), 0.01, lf.max_range)
+        t0 = time.perf_counter()
+        places, _ = best_places(grid, lf, (z, angles), np.random.default_rng(i), coarse=coarse, n_best=N_BEST)
+        seconds += time.perf_counter() - t0
+        dth = np.abs((places[:, 2] - x[2] + np.pi) % (2.0 * np.pi) - np.pi)
+        hit = (np.hypot(*(places[:, :2] - x[:2]).T) < 0.3) & (dth < 0.1)
+        found += bool(hit.any())
+        first += bool(hit[:1].any())
+    return found, first, seconds
+
+
+def measure() -> list[dict]:
+    rows = []
+    for kind in bs.KINDS:
+        for laser, (n_beams, fov, max_range) in bs.LASERS.items():
+            rng = np.random.default_rng([777, bs.KINDS.index(kind), list(bs.LASERS).index(laser)])
+            grid = bs.make_map(kind, rng)
+            lf = _model(grid, max_range)
+            found, first, seconds = _search(grid, lf, coarse_model(grid, lf), grid.sample_free(POSES, rng),
+                                            _angles(n_beams, fov), rng)
+            rows.append({"map": kind, "laser": laser, "poses": POSES, "found": found, "first": first,
+                         "ms": 1000.0 * seconds / POSES})
+    rng = np.random.default_rng(16831)
+    grid = maps.benchmark_map(800, 0.1)
+    lf = _model(grid, 30.0)
+    found, first, seconds = _search(grid, lf, coarse_model(grid, lf), grid.sample_free(POSES, rng),
+                                    _angles(180, 180.0), rng)
+    rows.append({"map": "bench_cli (80 x 80 m)", "laser": "cmu-180", "poses": POSES, "found": found, "first": first,
+                 "ms": 1000.0 * seconds / POSES})
+    return rows
+
+
+def report(rows: list[dict]) -> str:
+    lines = ["## bench_placesearch", "",
+             f"`placesearch.best_places` with the command line's default likelihood field (30 beams), {N_BEST} "
+             f"places per search, {POSES} poses per map and laser (`python benchmarks/bench_placesearch.py`). "
+             "Found: the robot's place (0.3 m, 0.1 rad) among the places; first: the best of them.", "",
+             "| map | laser | poses | found | first | ms per search |", "|---|---|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['map']} | {r['laser']} | {r['poses']} | {r['found']} | {r['first']} | {r['ms']:.1f} |")
+    small = rows[:-1]
+    lines.append(f"| all generated | | {sum(r['poses'] for r in small)} | {sum(r['found'] for r in small)} | "
+                 f"{sum(r['first'] for r in small)} | {np.mean([r['ms'] for r in small]):.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--write", action="store_true", help="write the bench_placesearch section of RESULTS.md")
+    args = ap.parse_args(argv)
+    print(f"measuring localize {localize.__version__} from {Path(localize.__file__).parent}", file=sys.stderr)
+    text = report(measure())
+    print(text)
+    if args.write:
+        bg.write_section(text, "bench_placesearch")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
