@@ -30,6 +30,24 @@ def table(rows: list[dict], columns: list[str]) -> str:
     return "\n".join([head, sep, *body])
 
 
+def _claim(path: Path):
+    """``path`` opened empty for writing, and locked: a second benchmark given the same file stops with a clear
+    error instead of interleaving its rows with the first one's (two writers corrupt JSON lines silently)."""
+    sink = open(path, "a")
+    try:
+        import fcntl
+    except ImportError:          # not POSIX: no lock, as before
+        fcntl = None
+    if fcntl is not None:
+        try:
+            fcntl.flock(sink.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            sink.close()
+            raise SystemExit(f"{path} is being written by another benchmark process; give this run another --json file")
+    sink.truncate(0)
+    return sink
+
+
 def run_jobs(run_one: Callable[[dict], dict], jobs: list[dict], workers: int = 2,
              json_path: Path | None = None) -> list[dict]:
     """``run_one`` on every job, in ``workers`` forked processes when more than one; the rows in the order they
@@ -39,7 +57,7 @@ def run_jobs(run_one: Callable[[dict], dict], jobs: list[dict], workers: int = 2
     # which checkout is measured: each script puts its own first on the path, before PYTHONPATH
     print(f"measuring localize {localize.__version__} from {Path(localize.__file__).parent}", file=sys.stderr)
     rows: list[dict] = []
-    sink = open(json_path, "w") if json_path else None
+    sink = _claim(Path(json_path)) if json_path else None
 
     def keep(row: dict) -> None:
         rows.append(row)
