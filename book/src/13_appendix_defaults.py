@@ -236,9 +236,9 @@ section = results_section("bench_global")
 print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 
 # %% [markdown]
-# The benchmark's goal — 95% success on every log — is reached on the four
-# real logs, Intel (100%), Freiburg 079 (98%), ACES (98%) and CSAIL (97%), and
-# missed by one run on the simulated Willow runs (93%, 56 of 60).
+# The benchmark's goal — 95% success on every log — is reached on all five
+# logs: Intel (100%), Freiburg 079 (98%), ACES (98%), CSAIL (97%) and, with no
+# run to spare, the simulated Willow runs (95%, 57 of 60).
 # Each default named above is there for one of these failures. They were
 # measured when the threshold state was the default, each against the
 # threshold state's run of the same draw (the section
@@ -283,16 +283,17 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # place; deciding by the weight alone, the filter would jump there.
 #
 # What the table does show is honesty: no run ended "localized" while more
-# than 1 m off. Every run ended localized within 1 m of the robot: the eight
-# failures found it only after the first 30% of the run, or left the 1 m band
-# for a while and came back. The last
+# than 1 m off. 299 of the 300 runs ended localized within 1 m of the robot.
+# Of the seven failures, six found it only after the first 30% of the run, or
+# left the 1 m band for a while and came back; one, on Willow, ended still
+# searching, far from the robot, and said so. The last
 # column is stricter: five runs (two on ACES, one on CSAIL, two on Willow)
-# called a wrong place "localized" at some scans, 14 of the 84,016 scans
+# called a wrong place "localized" at some scans, 29 of the 83,844 scans
 # called localized in all (the table below it, scan by scan). The threshold
-# state's run of the same draw calls 23 localized while more than 1 m off, and
-# says "localized" at 93.9% of the scans within 0.3 m of the truth (after the
-# first localized scan) where the probability says it at 98.8%: the threshold
-# state is lost far more often while right. The next cell checks these
+# state's run of the same draw calls fewer of them localized while more than
+# 1 m off (23), but says "localized" at only 93.9% of the scans within 0.3 m
+# of the truth (after the first localized scan), where the probability says
+# it at 98.9%: the threshold state is lost far more often while right. The next cell checks these
 # statements against the tables, so that a re-run of the benchmark cannot
 # silently contradict them.
 
@@ -303,16 +304,16 @@ if section:
         ok, runs = cells[2].split()[0].split("/")
         rows[name] = dict(success=int(ok) / int(runs), off=int(cells[9]))
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rows), sorted(rows)
-    claims = {"intel": 1.0, "freiburg-079": 0.98, "aces": 0.98, "csail": 0.97, "willow": 0.93}
+    claims = {"intel": 1.0, "freiburg-079": 0.98, "aces": 0.98, "csail": 0.97, "willow": 0.95}
     for log_name, rate in claims.items():
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
-    assert rows["willow"]["success"] == 56 / 60
+    assert rows["willow"]["success"] == 57 / 60
     assert all(r["off"] == 0 for r in rows.values())
-    assert sum(int(cells[8]) for cells in table_rows(section).values()) == 300    # every run ended localized
+    assert sum(int(cells[8]) for cells in table_rows(section).values()) == 299    # all but one ended localized
     some_scan = {name: int(cells[10]) for name, cells in table_rows(section).items()}
     assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 2, "csail": 1, "willow": 2}, some_scan
     scans_section = table_rows(section, 1)["all"]   # the scan-by-scan table's row "all"
-    assert scans_section[2] == "84016" and scans_section[3].startswith("14 ") and "(98.8%)" in scans_section[5], \
+    assert scans_section[2] == "83844" and scans_section[3].startswith("29 ") and "(98.9%)" in scans_section[5], \
         scans_section
     thresholds = results_section("bench_global_state_thresholds")
     t_rows = {name: cells[2].split()[0] for name, cells in table_rows(thresholds).items()}
@@ -370,8 +371,8 @@ print(held_out or "benchmarks/RESULTS.md has no bench_global_held_out section ye
 # its failures, and `bench_global_experiments_stop51` why they start in the
 # unknown square. The honesty holds on this draw as well: no run ended
 # "localized" more than 1 m off; six runs (three on CSAIL, three on Willow)
-# called a wrong place "localized" at some scans, 64 of the 82,981 scans
-# called localized (0.08%; the threshold state 29, 0.04%), and 99.1% of the
+# called a wrong place "localized" at some scans, 44 of the 82,891 scans
+# called localized (0.05%; the threshold state 29, 0.04%), and 99.1% of the
 # scans within 0.3 m said "localized" (the threshold state 94.0%).
 
 # %% tags=["remove-cell"]
@@ -384,7 +385,7 @@ if held_out:
     some_scan = {name: int(cells[10]) for name, cells in table_rows(held_out).items()}
     assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 0, "csail": 3, "willow": 3}, some_scan
     scans_held_out = table_rows(held_out, 1)["all"]   # the scan-by-scan table's row "all"
-    assert scans_held_out[2] == "82981" and scans_held_out[3].startswith("64 ") and "(99.1%)" in scans_held_out[5], \
+    assert scans_held_out[2] == "82891" and scans_held_out[3].startswith("44 ") and "(99.1%)" in scans_held_out[5], \
         scans_held_out
     t_held_out = results_section("bench_global_held_out_state_thresholds")
     assert table_rows(t_held_out)["willow"][2].startswith("52/60")
@@ -408,7 +409,7 @@ for name, draw in (("bench_state", "standard draw"), ("bench_state_held_out", "h
 
 # %% [markdown]
 # Both states are far less honest there than on the real logs: of the scans
-# the probability calls localized, 7.0% and 2.4% are more than 1 m off (the
+# the probability calls localized, 8.4% and 3.1% are more than 1 m off (the
 # threshold state: 10.0% and 8.3%), most of them in the symmetric hall and
 # the grids of alike rooms. A building of many alike rooms holds more
 # look-alikes than the rival bank keeps, and a new place starts at even odds
@@ -419,7 +420,7 @@ for name, draw in (("bench_state", "standard draw"), ("bench_state_held_out", "h
 # suggest and what did not work.
 
 # %% tags=["remove-cell"]
-for name, wrong in (("bench_state", ("(7.0%)", "(10.0%)")), ("bench_state_held_out", ("(2.4%)", "(8.3%)"))):
+for name, wrong in (("bench_state", ("(8.4%)", "(10.0%)")), ("bench_state_held_out", ("(3.1%)", "(8.3%)"))):
     cells = table_rows(results_section(name)).get("all")
     if cells:
         assert (cells[4].split()[-1], cells[8].split()[-1]) == wrong, (name, cells)
@@ -635,16 +636,17 @@ if speed:
         if line.startswith("|") and len(cells) > 7 and cells[1] == "defaults":
             factors[cells[0]] = float(cells[7].rstrip("x"))
     print(f"defaults: {factors['1000']:.0f}x real time with 1,000 particles, {factors['10000']:.0f}x with 10,000")
-    assert 1 < factors["1000"] < 10 and factors["10000"] > 0.5 * factors["1000"], factors   # the text below
+    assert factors["1000"] > 10 and factors["10000"] > 0.5 * factors["1000"], factors   # the text below
 
 # %% [markdown]
-# With either cloud the command runs several times faster than the robot
-# drove, so it keeps up with a robot, but with 1,000 particles it is short of
-# the ten times real time the project aims at, and the size of the cloud hardly
-# matters. Most of the time is not the particle filter but the answer to "am I
-# localized?": the rival bank of chapter 8 searches the whole map for
-# look-alike places every few scans (a profile is in `benchmarks/RESULTS.md`,
-# `bench_global_experiments_stop58`). (The global localization of the chapter
+# With either cloud the command runs more than ten times faster than the
+# robot drove, the project's aim with 1,000 particles, and the size of the
+# cloud hardly matters. Most of the time is not the particle filter but the
+# answer to "am I localized?": the rival bank of chapter 8 searches the whole
+# map for look-alike places every few scans. Each search rotates the scan once
+# per heading and slides it across the map cell by cell, one table lookup per
+# beam, as correlative scan matchers do (Olson, 2009); a profile is in
+# `benchmarks/RESULTS.md`, `bench_global_experiments_stop59`. (The global localization of the chapter
 # starts with tens of thousands of particles, `--particles auto`, and is slower
 # for its first scans, until KLD-sampling has shrunk the cloud.)
 
