@@ -43,7 +43,7 @@ def _claim(path: Path):
             fcntl.flock(sink.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             sink.close()
-            raise SystemExit(f"{path} is being written by another benchmark process; give this run another --json file")
+            raise SystemExit(f"{path} is being written by another benchmark process; give this run another --json file") from None
     sink.truncate(0)
     return sink
 
