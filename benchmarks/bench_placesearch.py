@@ -7,8 +7,8 @@ and is it the first?) and **time per search**. Both are measured on buildings
 no default was chosen on: ``bench_state.py``'s four kinds of building and four
 lasers (a building drawn from its own seed, 25 poses each, scans ray-cast with
 2 cm noise), and, for time, ``bench_cli.py``'s 800 x 800-cell map with its
-30 m laser. The sensor model is the command line's default likelihood field
-(30 beams, ``sigma_hit`` 0.2, ``z_short`` 0.2, ``temper`` 0.3).
+30 m laser. The sensor model is the likelihood field ``localize run`` builds with its defaults
+(``pipeline.make_sensor`` with ``settings.DEFAULTS``; the beams kept by ``max_beams``).
 
     python benchmarks/bench_placesearch.py [--write]
 
@@ -33,22 +33,20 @@ import bench_global as bg  # noqa: E402
 import bench_state as bs  # noqa: E402
 
 import localize  # noqa: E402
-from localize import maps  # noqa: E402
+from localize import maps, pipeline, settings  # noqa: E402
 from localize.placesearch import best_places, coarse_model  # noqa: E402
 from localize.raycast import RayCaster  # noqa: E402
-from localize.sensors import LikelihoodField  # noqa: E402
 
 POSES = 25
 N_BEST = 16
 
 
-def _model(grid, max_range: float) -> LikelihoodField:
-    return LikelihoodField(grid, max_range, sigma_hit=0.2, max_beams=30, z_short=0.2, temper=0.3)
-
-
-def _angles(n_beams: int, fov: float) -> np.ndarray:
-    half = np.radians(fov) / 2.0
-    return np.linspace(-half, half, n_beams) if fov < 360.0 else np.linspace(-np.pi, np.pi, n_beams, endpoint=False)
+def _model(grid, max_range: float):
+    """The likelihood field ``localize run`` builds with its defaults (its beams kept by ``max_beams``)."""
+    d = settings.DEFAULTS
+    return pipeline.make_sensor("likelihood", grid, max_range, np.zeros(3), temper=d["temper"],
+                                sigma_hit=d["sigma_hit"], z_short=d["z_short"], min_range=d["min_range"],
+                                max_beams=d["beams"])
 
 
 def _search(grid, lf, coarse, truths, angles, rng) -> tuple[int, int, float]:
@@ -71,19 +69,19 @@ def _search(grid, lf, coarse, truths, angles, rng) -> tuple[int, int, float]:
 def measure() -> list[dict]:
     rows = []
     for kind in bs.KINDS:
-        for laser, (n_beams, fov, max_range) in bs.LASERS.items():
+        for laser, (_, _, max_range) in bs.LASERS.items():
             rng = np.random.default_rng([777, bs.KINDS.index(kind), list(bs.LASERS).index(laser)])
             grid = bs.make_map(kind, rng)
             lf = _model(grid, max_range)
             found, first, seconds = _search(grid, lf, coarse_model(grid, lf), grid.sample_free(POSES, rng),
-                                            _angles(n_beams, fov), rng)
+                                            bs.laser_angles(laser), rng)
             rows.append({"map": kind, "laser": laser, "poses": POSES, "found": found, "first": first,
                          "ms": 1000.0 * seconds / POSES})
     rng = np.random.default_rng(16831)
     grid = maps.benchmark_map(800, 0.1)
     lf = _model(grid, 30.0)
     found, first, seconds = _search(grid, lf, coarse_model(grid, lf), grid.sample_free(POSES, rng),
-                                    _angles(180, 180.0), rng)
+                                    np.linspace(-np.pi / 2, np.pi / 2, 180), rng)
     rows.append({"map": "bench_cli (80 x 80 m)", "laser": "cmu-180", "poses": POSES, "found": found, "first": first,
                  "ms": 1000.0 * seconds / POSES})
     return rows
@@ -91,7 +89,7 @@ def measure() -> list[dict]:
 
 def report(rows: list[dict]) -> str:
     lines = ["## bench_placesearch", "",
-             f"`placesearch.best_places` with the command line's default likelihood field (30 beams), {N_BEST} "
+             f"`placesearch.best_places` with the command line's default likelihood field ({settings.DEFAULTS['beams']} beams), {N_BEST} "
              f"places per search, {POSES} poses per map and laser (`python benchmarks/bench_placesearch.py`). "
              "Found: the robot's place (0.3 m, 0.1 rad) among the places; first: the best of them.", "",
              "| map | laser | poses | found | first | ms per search |", "|---|---|---:|---:|---:|---:|"]

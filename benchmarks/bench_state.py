@@ -124,17 +124,22 @@ def make_map(kind: str, rng: np.random.Generator) -> OccupancyGrid:
     raise ValueError(f"unknown building kind {kind!r}; choose one of {', '.join(KINDS)}")
 
 
+def laser_angles(laser: str) -> np.ndarray:
+    """The beam angles of a laser of :data:`LASERS`: evenly spread over its field of view (a full turn without
+    repeating the first beam)."""
+    n_beams, fov, _ = LASERS[laser]
+    half = np.radians(fov) / 2.0
+    return (np.linspace(-half, half, n_beams) if fov < 360.0
+            else np.linspace(-np.pi, np.pi, n_beams, endpoint=False))
+
+
 def prepare(job: dict):
     """``(map, log)`` of one run: the building, and a robot's log in it (the same for both states)."""
     kind, laser, seed = job["kind"], job["laser"], job["seed"]
     rng = np.random.default_rng([seed, KINDS.index(kind), list(LASERS).index(laser), 4343])
     grid = make_map(kind, rng)
-    n_beams, fov, max_range = LASERS[laser]
-    half = np.radians(fov) / 2.0
-    angles = (np.linspace(-half, half, n_beams) if fov < 360.0
-              else np.linspace(-np.pi, np.pi, n_beams, endpoint=False))
-    run = sim.range_run(grid, rng, n_steps=job["scans"], speed=0.4, dt=1.0, angles=angles, max_range=max_range,
-                        n_clutter=5, when_blocked="open_side")
+    run = sim.range_run(grid, rng, n_steps=job["scans"], speed=0.4, dt=1.0, angles=laser_angles(laser),
+                        max_range=LASERS[laser][2], n_clutter=5, when_blocked="open_side")
     return grid, run.to_log()
 
 
