@@ -231,6 +231,54 @@ class OccupancyGrid:
         return m
 
     @cached_property
+    def holes(self) -> NDArray[np.bool_]:
+        """Unknown cells where the robot may stand: the holes of the mapped floor.
+
+        A region of unknown cells (4-connected) is a hole when it does not reach
+        the map's edge and more of the known cells along its border are open
+        floor than not: free cells in a 3 x 3 block of free cells, the smallest
+        patch of floor a grid can show. A hole is a patch of floor that the map
+        left unknown (people standing there while it was built, glass, a region
+        erased by hand), and the robot may well drive through it. The unknown
+        that reaches the edge is the outside of the building; a region fenced
+        by walls, or seen only through a door as the thin lines of free cells
+        that a laser's rays leave, is space the robot did not reach. Global
+        localization and its restarts draw particles here as well as in the
+        free cells when the filter lets particles stand in unknown cells
+        (:class:`localize.mcl.MCL`, ``unknown_allowed``), and the place search
+        looks here (:func:`localize.placesearch.lattice`): a robot that starts
+        in a hole is otherwise never looked for where it is.
+
+        Examples
+        --------
+        >>> data = np.zeros((12, 12))
+        >>> data[[0, -1], :] = data[:, [0, -1]] = 1.0      # a walled room
+        >>> data[5:7, 3:5] = np.nan                        # a patch of its floor left unknown
+        >>> data[8:11, 7] = 1.0                            # a closet in its corner, never looked into
+        >>> data[8:11, 8:11] = np.nan
+        >>> g = OccupancyGrid(data, 0.5)
+        >>> int(g.unknown.sum()), np.argwhere(g.holes).tolist()
+        (13, [[5, 3], [5, 4], [6, 3], [6, 4]])
+        """
+        from scipy import ndimage
+
+        floor = ndimage.binary_opening(self.free, structure=np.ones((3, 3), dtype=bool))
+        labels, n = ndimage.label(self.unknown)
+        padded = np.pad(labels, 1)
+        floor_n, other_n = np.zeros(n + 1), np.zeros(n + 1)
+        for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):         # each known cell's neighbour's region
+            nb = padded[1 + di:1 + di + labels.shape[0], 1 + dj:1 + dj + labels.shape[1]]
+            border = ~self.unknown & (nb > 0)
+            np.add.at(floor_n, nb[border & floor], 1)
+            np.add.at(other_n, nb[border & ~floor], 1)
+        hole = floor_n > other_n
+        hole[np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))] = False
+        hole[0] = False
+        m = hole[labels]
+        m.setflags(write=False)
+        return m
+
+    @cached_property
     def distance_field(self) -> NDArray[np.float64]:
         """Euclidean distance (metres) from each cell centre to the nearest obstacle centre.
 
@@ -358,10 +406,11 @@ class OccupancyGrid:
         return out
 
     # --------------------------------------------------------------- sampling
-    def sample_free(self, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
+    def sample_free(self, n: int, rng: np.random.Generator, *, holes: bool = False) -> NDArray[np.float64]:
         """Draw ``n`` poses uniformly over the free space, headings uniform in ``[-pi, pi)``.
 
-        A free cell is picked uniformly, then a point uniformly inside it.
+        A free cell is picked uniformly, then a point uniformly inside it;
+        with ``holes``, a cell of the free space or of the :attr:`holes`.
 
         Examples
         --------
@@ -372,7 +421,7 @@ class OccupancyGrid:
         """
         check_rng(rng)
         n = check_count(n, "n", minimum=0)
-        free = np.flatnonzero(self.free)
+        free = np.flatnonzero(self.free | self.holes if holes else self.free)
         if free.size == 0:
             raise ValueError("the map has no free cell to sample from")
         k = free[rng.integers(0, free.size, size=n)]

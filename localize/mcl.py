@@ -39,6 +39,7 @@ model of :mod:`localize.sensors`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, Callable
 
 import numpy as np
@@ -104,11 +105,14 @@ _PSD_TOL = 1e-12
 
 
 # --------------------------------------------------------------------------- initialisers
-def uniform_particles(grid: OccupancyGrid, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
+def uniform_particles(grid: OccupancyGrid, n: int, rng: np.random.Generator, *,
+                      holes: bool = False) -> NDArray[np.float64]:
     """``n`` poses drawn uniformly over the known-free cells of ``grid``, headings uniform.
 
     The prior of global localization: the robot is somewhere in free space,
-    facing anywhere (the initialisation of the seed 001 report).
+    facing anywhere (the initialisation of the seed 001 report). With
+    ``holes``, in the map's :attr:`~localize.grid.OccupancyGrid.holes` too
+    (unknown patches of the floor).
 
     Examples
     --------
@@ -118,7 +122,7 @@ def uniform_particles(grid: OccupancyGrid, n: int, rng: np.random.Generator) -> 
     >>> p.shape, bool(g.is_free(p).all())
     ((500, 3), True)
     """
-    return check_grid(grid).sample_free(check_count(n, "n"), check_rng(rng))
+    return check_grid(grid).sample_free(check_count(n, "n"), check_rng(rng), holes=bool(holes))
 
 
 def gaussian_particles(
@@ -356,7 +360,9 @@ class MCL:
         Adapt the number of particles at each resampling (Fox 2003).
     sampler : callable, optional
         ``sampler(n, rng) -> (n, 3)`` draws random particles for injection
-        and recovery. Defaults to uniform over the free cells of ``grid``.
+        and recovery. Defaults to uniform over the free cells of ``grid``
+        (and its :attr:`~localize.grid.OccupancyGrid.holes` with
+        ``unknown_allowed``).
     grid : OccupancyGrid, optional
         The map: the default ``sampler`` and, with ``free_space_only``, the
         set of allowed positions.
@@ -367,6 +373,9 @@ class MCL:
         With ``free_space_only``: let particles stand in *unknown* cells too
         (only known obstacles and the outside of the map are forbidden). Real
         maps leave parts of a building unknown, and the robot drives there.
+        The default ``sampler`` (and :meth:`uniform`) then draws over the
+        map's :attr:`~localize.grid.OccupancyGrid.holes` as well as its free
+        cells: the robot may also start in an unknown patch of the floor.
     occupied_penalty : float
         With ``free_space_only``: the log-likelihood a particle in a known
         obstacle loses at each update (> 0 nats). ``np.inf`` (the default)
@@ -462,7 +471,7 @@ class MCL:
         self.kld = kld
         self.grid = None if grid is None else check_grid(grid)
         if sampler is None and grid is not None:
-            sampler = grid.sample_free
+            sampler = partial(grid.sample_free, holes=bool(unknown_allowed))
         self.sampler = sampler
         if on_degenerate not in ("keep", "reinitialize"):
             raise ValueError(f"on_degenerate must be 'keep' or 'reinitialize'; got {on_degenerate!r}")
@@ -511,7 +520,10 @@ class MCL:
         """Global localization: ``n`` particles uniform over the free cells of ``grid``.
 
         ``grid`` is also passed on as the filter's map (random injection and
-        recovery draw from its free space). Other options as in :class:`MCL`.
+        recovery draw from its free space). With ``unknown_allowed``, the
+        particles are drawn over the map's
+        :attr:`~localize.grid.OccupancyGrid.holes` too. Other options as in
+        :class:`MCL`.
 
         Examples
         --------
@@ -525,7 +537,8 @@ class MCL:
         """
         rng = check_rng(rng)
         options.setdefault("grid", grid)
-        return cls(uniform_particles(grid, n, rng), motion, sensor, rng=rng, **options)
+        holes = bool(options.get("unknown_allowed", False))
+        return cls(uniform_particles(grid, n, rng, holes=holes), motion, sensor, rng=rng, **options)
 
     @classmethod
     def gaussian(

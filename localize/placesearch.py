@@ -69,7 +69,8 @@ def coarse_model(grid: OccupancyGrid, sensor: Any, sigma: float = COARSE_SIGMA) 
 
 
 def lattice(grid: OccupancyGrid, spacing: float, rng: np.random.Generator) -> NDArray[np.float64]:
-    """Free positions ``(P, 2)`` on a square lattice of ``spacing`` metres, shifted by a random offset.
+    """Positions ``(P, 2)`` where the robot may stand, on a square lattice of ``spacing`` metres, shifted by a random
+    offset: the map's free cells and its :attr:`~localize.grid.OccupancyGrid.holes` (unknown patches of the floor).
 
     Examples
     --------
@@ -82,7 +83,11 @@ def lattice(grid: OccupancyGrid, spacing: float, rng: np.random.Generator) -> ND
     off = rng.uniform(0.0, spacing, 2)
     gx, gy = np.meshgrid(np.arange(x0 + off[0], x1, spacing), np.arange(y0 + off[1], y1, spacing))
     xy = np.column_stack([gx.ravel(), gy.ravel()])
-    return xy[grid.is_free(xy)]
+    cells = grid.world_to_cell(xy, outside="flag")
+    inside = cells[:, 0] >= 0
+    ok = np.zeros(len(xy), dtype=bool)
+    ok[inside] = (grid.free | grid.holes)[cells[inside, 0], cells[inside, 1]]
+    return xy[ok]
 
 
 def scores(sensor: Any, poses: NDArray, z: tuple) -> NDArray[np.float64]:

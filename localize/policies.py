@@ -748,7 +748,7 @@ class SensorReset:
     Mixture MCL do (Thrun, Fox, Burgard and Dellaert, *Robust Monte Carlo
     localization for mobile robots*, Artificial Intelligence 128, 2001). With
     ``p = p_localized``, the prior of the robot's pose is ``p`` times the old
-    belief plus ``1 - p`` times uniform over the free space ``u`` (the belief
+    belief plus ``1 - p`` times uniform over the free space and the holes ``u`` (the belief
     is wrong: the robot may be anywhere). The set was drawn from ``1 - s``
     times the old belief plus ``s`` times the places' mixture ``q``. Where the
     old belief is nil, a drawn particle's weight against a kept one is then
@@ -782,7 +782,7 @@ class SensorReset:
         self.share, self.below, self.n_places = float(share), float(below), int(n_places)
         self.spread = np.array([spread[0], spread[0], spread[1]], dtype=float)
         self.coarse = coarse_model(grid, sensor) if coarse is None else coarse    # the rival bank's, when given
-        self.log_free_volume = float(np.log(max(np.count_nonzero(grid.free), 1) * grid.resolution ** 2 * 2 * np.pi))
+        self.log_free_volume = float(np.log(max(np.count_nonzero(grid.free | grid.holes), 1) * grid.resolution ** 2 * 2 * np.pi))
         self.rng = np.random.default_rng(seed)       # the lattice's offsets: the filter's stream is not touched
         self.n_resets = 0
 

@@ -37,7 +37,8 @@ from localize.geometry import compose, relative
 from localize.grid import OccupancyGrid
 
 __all__ = ["Scenario", "run", "position_errors", "dead_laser", "corrupt_odometry", "kidnapping", "corridor",
-           "missing_odometry_in_turn", "understated_max_range", "moved_obstacle", "walking_person"]
+           "missing_odometry_in_turn", "understated_max_range", "moved_obstacle", "walking_person",
+           "start_in_a_hole"]
 
 #: The particles every scenario is run with (the CLI's default, "auto", sizes the cloud from the map's
 #: free space: about 20,000 here, 7 times slower and no different in these small worlds).
@@ -328,6 +329,35 @@ def walking_person(start: int = 60, n_scans: int = 20, ahead: float = 0.6, radiu
                    f"{start}-{start + n_scans - 1}", _at(range(start, start + n_scans), len(r)), ranges=ranges)
     sc.extra["blocked"] = blocked
     return sc
+
+
+def start_in_a_hole(side: float = 3.0) -> Scenario:
+    """The robot starts amid a square of ``side`` m that the map leaves unknown: floor the map does not know.
+
+    People stood there while the map was made, or the region was erased, as
+    ``benchmarks/bench_global.py`` does to every map it degrades. The square
+    is centred on the robot's first pose and covers whatever lies there
+    (floor, and walls if any); the robot leaves it after a dozen scans. The
+    rest of the map is perfect, with the simulator's usual unmapped clutter.
+
+    Examples
+    --------
+    >>> sc = start_in_a_hole()
+    >>> cells = sc.grid.world_to_cell(sc.truth[:, :2])
+    >>> int(sc.fault.sum()), bool(sc.grid.holes[cells[0, 0], cells[0, 1]])
+    (12, True)
+    """
+    world = rooms()
+    r = _drive(world)
+    res = world.resolution
+    i, j = (np.asarray(r.poses)[0, 1::-1] / res).astype(int)
+    h = int(round(side / res / 2))
+    data = np.array(world.data)
+    data[max(i - h, 0):i + h, max(j - h, 0):j + h] = np.nan
+    grid = OccupancyGrid(data, res)
+    cells = grid.world_to_cell(np.asarray(r.poses)[:, :2])
+    return _scenario("start in a hole", grid, r, f"the robot starts amid a {side:g} m square the map leaves unknown",
+                     grid.unknown[cells[:, 0], cells[:, 1]])
 
 
 def waiting_robot(drive: int = 80, wait: int = 300, sigma: float = 0.01) -> Scenario:

@@ -146,6 +146,49 @@ def test_sample_free_uniform_over_free_space():
     np.testing.assert_array_equal(g.sample_free(10, np.random.default_rng(1)), g.sample_free(10, np.random.default_rng(1)))
 
 
+def _holes_map() -> OccupancyGrid:
+    """A walled room amid unknown that reaches the map's edge, with a patch of its floor left unknown, and a back
+    room that the map's laser saw only through its door: one-cell lines of free cells between unknown strips."""
+    data = np.full((30, 30), np.nan)
+    data[2:28, 2:28] = 0.0
+    data[2, 2:28] = data[27, 2:28] = data[2:28, 2] = data[2:28, 27] = 1.0
+    data[8:12, 6:11] = np.nan                                   # the patch: 4 x 5 cells
+    data[18, 14:27] = data[18:27, 14] = 1.0                     # the back room's walls, its door at column 20
+    data[19:27, 15:27] = np.nan
+    data[19:27, 16:27:2] = 0.0                                   # the rays that crossed it
+    data[18, 20] = 0.0
+    return OccupancyGrid(data, 0.1)
+
+
+def test_holes_are_the_unknown_patches_of_the_floor():
+    g = _holes_map()
+    holes = g.holes
+    assert {(int(i), int(j)) for i, j in np.argwhere(holes)} == {(i, j) for i in range(8, 12) for j in range(6, 11)}
+    # neither the outside (it reaches the edge) nor the strips between the rays (bordered by one-cell lines of free
+    # cells, not by floor) is a hole
+    assert g.unknown[0, 0] and g.unknown[20, 15] and not holes[0, 0] and not holes[20, 15]
+    with pytest.raises(ValueError):
+        holes[8, 6] = False                       # read-only, like the other masks
+    # small()'s one unknown cell has no open floor around it (a 3 x 3 block of free cells) ...
+    assert small().unknown.sum() == 1 and not small().holes.any()
+    # ... and a map without unknown cells has none, and neither has an unknown map (it all reaches the edge)
+    assert not OccupancyGrid(np.zeros((4, 4)), 1.0).holes.any()
+    assert not OccupancyGrid(np.full((4, 4), np.nan), 1.0).holes.any()
+
+
+def test_sample_free_with_holes_draws_over_the_floor_and_its_holes_alike():
+    g = _holes_map()
+    n = 60_000
+    p = g.sample_free(n, np.random.default_rng(2), holes=True)
+    cells = g.world_to_cell(p)
+    in_hole = g.holes[cells[:, 0], cells[:, 1]]
+    assert np.all(g.free[cells[:, 0], cells[:, 1]] | in_hole)           # never in a wall or the outside
+    share = g.holes.sum() / (g.holes.sum() + g.free.sum())               # uniform per cell over both
+    assert abs(in_hole.mean() - share) < 5 * np.sqrt(share * (1 - share) / n)
+    # without holes: the free cells only
+    assert np.all(g.is_free(g.sample_free(1000, np.random.default_rng(2))))
+
+
 def test_sample_free_errors():
     g = small()
     with pytest.raises(TypeError, match="Generator"):

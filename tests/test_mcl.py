@@ -796,6 +796,35 @@ def test_unknown_cells_allowed_with_a_soft_penalty():
     assert soft.weights[1] / soft.weights[0] == pytest.approx(np.exp(-1.0))
 
 
+def test_global_localization_and_injection_draw_in_the_maps_holes_only_when_unknown_cells_are_allowed():
+    from localize.grid import OccupancyGrid
+
+    data = np.zeros((20, 20))
+    data[[0, -1], :] = data[:, [0, -1]] = 1.0                     # a walled room ...
+    data[8:12, 8:12] = np.nan                                   # ... whose floor has an unknown patch
+    g = OccupancyGrid(data, 0.5)
+    n = 20_000
+
+    class Flat:
+        def log_likelihood(self, poses, *z):
+            return np.zeros(len(poses))
+
+    def share_in_holes(poses):
+        c = g.world_to_cell(poses)
+        assert not np.any(g.occupied[c[:, 0], c[:, 1]])
+        return float(g.holes[c[:, 0], c[:, 1]].mean())
+
+    share = 16 / (16 + g.free.sum())                            # the patch's share of the floor, cell for cell
+    tol = 5 * np.sqrt(share * (1 - share) / n)
+    allowed = MCL.uniform(g, n, shift, Flat(), rng=np.random.default_rng(0), free_space_only=True,
+                          unknown_allowed=True)
+    assert abs(share_in_holes(allowed.particles) - share) < tol
+    assert abs(share_in_holes(allowed.sampler(n, np.random.default_rng(1))) - share) < tol   # injection, restarts
+    strict = MCL.uniform(g, n, shift, Flat(), rng=np.random.default_rng(0), free_space_only=True)
+    assert share_in_holes(strict.particles) == 0.0 and share_in_holes(strict.sampler(n, np.random.default_rng(1))) == 0.0
+    assert abs(share_in_holes(uniform_particles(g, n, np.random.default_rng(2), holes=True)) - share) < tol
+
+
 def test_run_filter_rejects_an_impossible_odometry_step_and_reports_it():
     from localize.mcl import OdometryMotion
     from localize.runloop import run_filter

@@ -131,3 +131,23 @@ def test_scores_at_cells_reject_what_is_not_a_cell(rooms):
     with pytest.raises(ValueError, match="headings must be finite"):
         lf.log_likelihood_at_cells([[1, 3]], [np.nan], *z)
     assert lf.log_likelihood_at_cells(np.empty((0, 2), dtype=int), [0.0, 1.0], *z).shape == (0, 2)
+
+
+def test_a_robot_standing_in_a_hole_of_the_map_is_found_there(rooms):
+    """A 3 m square of floor left unknown in the map, the robot at its centre: the lattice covers the map's holes
+    (``OccupancyGrid.holes``), and the robot's place is the best found on most seeds of the lattice's draw."""
+    truth = np.array([4.0, 7.0, 0.5])
+    data = np.array(rooms.data)
+    i, j = int(truth[1] / rooms.resolution), int(truth[0] / rooms.resolution)
+    data[i - 15:i + 15, j - 15:j + 15] = np.nan
+    holed = type(rooms)(data, rooms.resolution)
+    assert holed.holes[i, j]
+    xy = lattice(holed, 0.5, np.random.default_rng(0))
+    c = holed.world_to_cell(xy)
+    assert holed.holes[c[:, 0], c[:, 1]].sum() >= 30            # (3 m / 0.5 m)^2 = 36 lattice points in the hole
+    lf = LikelihoodField(holed, 8.0, sigma_hit=0.1)
+    z = _z(rooms, truth)                                          # the world has the floor the map leaves unknown
+    coarse = coarse_model(holed, lf)
+    first = [np.hypot(*(best_places(holed, lf, z, np.random.default_rng(s), coarse=coarse)[0][0, :2] - truth[:2]))
+             for s in range(10)]
+    assert sum(d < 0.3 for d in first) >= 8, np.round(first, 2)
