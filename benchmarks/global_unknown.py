@@ -1,8 +1,10 @@
 """Which runs of ``bench_global.py`` drive through the region that the degraded map leaves unknown?
 
 ``bench_global.py`` degrades every map (walls thickened, obstacles added and removed, **a region made
-unknown**). A robot that starts, or spends the first scans, in that region has no particle near it there:
-global localization and every restart draw their particles over the map's *free* cells. This reads a
+unknown**). A robot that starts, or spends the first scans, in that region had no particle near it there
+until stop 60: global localization and every restart drew their particles over the map's *free* cells only.
+They now draw over the map's holes too (``OccupancyGrid.holes``: unknown regions bordered mostly by open
+floor), which holds the region when it lies amid the floor, not when it covers mostly walls. This reads a
 ``bench_global.py --json`` file and prints, per log, the success of the runs whose reference poses lie in
 an unknown cell at some scan of the first 30% of the run (the window within which a run must find the
 robot to count as a success) against the others.

@@ -230,8 +230,14 @@ assert np.all(log.ranges[log.no_return] >= 81.8) and log.ranges[~log.no_return].
 #
 # Cells the map maker never observed are unknown (`NaN`). A laser cannot see
 # through them — or rather, we cannot promise that it can — so ray casting and
-# the distance field treat them as obstacles, while a global localizer draws its
-# initial particles only from *known free* cells.
+# the distance field treat them as obstacles, while chapter 7's global localizer
+# draws its initial particles only from *known free* cells. The command-line
+# localizer lets particles stand in unknown cells, and draws them over the map's
+# *holes* as well (`grid.holes`): unknown patches that do not reach the map's
+# edge and whose border is mostly open floor, not walls or the thin lines of
+# free cells that rays seen through a door leave — where people stood while the
+# map was made, or a region erased by hand. A robot can start there, and a
+# filter that never looks there finds it only once it drives out.
 #
 # Real maps are also wrong: the Wean Hall map draws walls 10-15 cm thicker than
 # the laser sees them, and furniture has moved. A `sigma_hit` of a few

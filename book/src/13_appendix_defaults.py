@@ -237,8 +237,8 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 
 # %% [markdown]
 # The benchmark's goal — 95% success on every log — is reached on all five
-# logs: Intel (100%), Freiburg 079 (98%), ACES (98%), CSAIL (97%) and, with no
-# run to spare, the simulated Willow runs (95%, 57 of 60).
+# logs: Intel (100%), Freiburg 079 (98%), ACES (95%, 57 of 60: no run to
+# spare), CSAIL (100%) and the simulated Willow runs (97%).
 # Each default named above is there for one of these failures. They were
 # measured when the threshold state was the default, each against the
 # threshold state's run of the same draw (the section
@@ -283,17 +283,16 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # place; deciding by the weight alone, the filter would jump there.
 #
 # What the table does show is honesty: no run ended "localized" while more
-# than 1 m off. 299 of the 300 runs ended localized within 1 m of the robot.
-# Of the seven failures, six found it only after the first 30% of the run, or
-# left the 1 m band for a while and came back; one, on Willow, ended still
-# searching, far from the robot, and said so. The last
-# column is stricter: five runs (two on ACES, one on CSAIL, two on Willow)
-# called a wrong place "localized" at some scans, 29 of the 83,844 scans
-# called localized in all (the table below it, scan by scan). The threshold
-# state's run of the same draw calls fewer of them localized while more than
-# 1 m off (23), but says "localized" at only 93.9% of the scans within 0.3 m
-# of the truth (after the first localized scan), where the probability says
-# it at 98.9%: the threshold state is lost far more often while right. The next cell checks these
+# than 1 m off, and all 300 runs ended localized within 1 m of the robot. Of
+# the six failures, three found it only after the first 30% of the run, and
+# three localized within five scans but did not stay within the success band.
+# The last column is stricter: three runs (one on ACES, two on Willow) called
+# a wrong place "localized" at some scans, 9 of the 83,831 scans called
+# localized in all (the table below it, scan by scan). The threshold state's
+# run of the same draw calls more of them localized while more than 1 m off
+# (23), and says "localized" at only 93.9% of the scans within 0.3 m of the
+# truth (after the first localized scan), where the probability says it at
+# 98.7%: the threshold state is lost far more often while right. The next cell checks these
 # statements against the tables, so that a re-run of the benchmark cannot
 # silently contradict them.
 
@@ -304,16 +303,16 @@ if section:
         ok, runs = cells[2].split()[0].split("/")
         rows[name] = dict(success=int(ok) / int(runs), off=int(cells[9]))
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rows), sorted(rows)
-    claims = {"intel": 1.0, "freiburg-079": 0.98, "aces": 0.98, "csail": 0.97, "willow": 0.95}
+    claims = {"intel": 1.0, "freiburg-079": 0.98, "aces": 0.95, "csail": 1.0, "willow": 0.97}
     for log_name, rate in claims.items():
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
-    assert rows["willow"]["success"] == 57 / 60
+    assert rows["aces"]["success"] == 57 / 60
     assert all(r["off"] == 0 for r in rows.values())
-    assert sum(int(cells[8]) for cells in table_rows(section).values()) == 299    # all but one ended localized
+    assert sum(int(cells[8]) for cells in table_rows(section).values()) == 300    # every run ended localized
     some_scan = {name: int(cells[10]) for name, cells in table_rows(section).items()}
-    assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 2, "csail": 1, "willow": 2}, some_scan
+    assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 1, "csail": 0, "willow": 2}, some_scan
     scans_section = table_rows(section, 1)["all"]   # the scan-by-scan table's row "all"
-    assert scans_section[2] == "83844" and scans_section[3].startswith("29 ") and "(98.9%)" in scans_section[5], \
+    assert scans_section[2] == "83831" and scans_section[3].startswith("9 ") and "(98.7%)" in scans_section[5], \
         scans_section
     thresholds = results_section("bench_global_state_thresholds")
     t_rows = {name: cells[2].split()[0] for name, cells in table_rows(thresholds).items()}
@@ -358,9 +357,9 @@ held_out = results_section("bench_global_held_out")
 print(held_out or "benchmarks/RESULTS.md has no bench_global_held_out section yet")
 
 # %% [markdown]
-# The four real logs reach 95% there too (CSAIL just: 57 of 60). The simulated
-# Willow runs do not (85%; the threshold state: 87%), and here the work is not
-# finished: in most of the failed runs the
+# The four real logs reach 95% there too (Freiburg 079 and CSAIL just: 57 of
+# 60 each). The simulated Willow runs do not (85%; the threshold state: 87%),
+# and here the work is not finished: in most of the failed runs the
 # filter finds the robot, but only after the first 30% of the run. Where the
 # simulated robot starts inside the square that the degraded map leaves
 # unknown, or next to unmapped clutter, its first scans say nothing the map
@@ -369,23 +368,27 @@ print(held_out or "benchmarks/RESULTS.md has no bench_global_held_out section ye
 # above find the robot later. The note of the threshold state's section in
 # `benchmarks/RESULTS.md` (`bench_global_held_out_state_thresholds`) lists
 # its failures, and `bench_global_experiments_stop51` why they start in the
-# unknown square. The honesty holds on this draw as well: no run ended
-# "localized" more than 1 m off; six runs (three on CSAIL, three on Willow)
-# called a wrong place "localized" at some scans, 44 of the 82,891 scans
-# called localized (0.05%; the threshold state 29, 0.04%), and 99.1% of the
-# scans within 0.3 m said "localized" (the threshold state 94.0%).
+# unknown square. Drawing particles in the map's holes too (chapter 9's
+# unknown patches of open floor) does not find them: the square covers walls
+# as well as floor, and the scans there fit the map poorly wherever the
+# particles are. The honesty holds on this draw as well: no run ended
+# "localized" more than 1 m off; ten runs (one on Freiburg 079, three each on
+# ACES, CSAIL and Willow) called a wrong place "localized" at some scans, 123
+# of the 83,107 scans called localized (0.15%; the threshold state 29, 0.04%),
+# and 99.1% of the scans within 0.3 m said "localized" (the threshold state
+# 94.0%).
 
 # %% tags=["remove-cell"]
 if held_out:
     rates = {name: cells[2].split()[0] for name, cells in table_rows(held_out).items()}
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rates), rates
     assert all(int(r.split("/")[0]) >= 0.95 * int(r.split("/")[1]) for name, r in rates.items() if name != "willow"), rates
-    assert rates["willow"] == "51/60" and rates["csail"] == "57/60", rates   # 85%, 95%
+    assert rates["willow"] == "51/60" and rates["csail"] == rates["freiburg-079"] == "57/60", rates   # 85%, 95%
     assert all(int(cells[9]) == 0 for cells in table_rows(held_out).values())
     some_scan = {name: int(cells[10]) for name, cells in table_rows(held_out).items()}
-    assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 0, "csail": 3, "willow": 3}, some_scan
+    assert some_scan == {"intel": 0, "freiburg-079": 1, "aces": 3, "csail": 3, "willow": 3}, some_scan
     scans_held_out = table_rows(held_out, 1)["all"]   # the scan-by-scan table's row "all"
-    assert scans_held_out[2] == "82891" and scans_held_out[3].startswith("44 ") and "(99.1%)" in scans_held_out[5], \
+    assert scans_held_out[2] == "83107" and scans_held_out[3].startswith("123 ") and "(99.1%)" in scans_held_out[5], \
         scans_held_out
     t_held_out = results_section("bench_global_held_out_state_thresholds")
     assert table_rows(t_held_out)["willow"][2].startswith("52/60")
