@@ -7,7 +7,8 @@ Global localization with Monte Carlo Localization on a real (or simulated) log::
     localize map --log intel-corrected.log.gz --out intel.yaml
 
 ``run`` reads a map and a log (formats detected from their content), spreads
-particles uniformly over the free space of the map, and filters every scan:
+particles uniformly over the free space of the map (and its unknown patches of
+floor, ``OccupancyGrid.holes``), and filters every scan:
 predict with the odometry motion between scans, weight with a range sensor
 model, resample. It writes
 

@@ -9,7 +9,8 @@ such places in two stages:
 
 1. **Search**: the scan is scored by a *blurred* likelihood field
    (:func:`coarse_model`, end points blurred by :data:`COARSE_SIGMA`) at every
-   free position of a lattice ``2 * COARSE_SIGMA`` apart (:func:`lattice`,
+   position of a lattice ``2 * COARSE_SIGMA`` apart where the robot may stand
+   (a free cell, or one of the map's unknown patches of floor; :func:`lattice`,
    randomly shifted at each call, each position moved to its map cell's
    centre) x :data:`COARSE_HEADINGS` headings: the scan is rotated once per
    heading and slid from cell to cell
