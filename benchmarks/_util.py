@@ -48,14 +48,18 @@ def _claim(path: Path):
     return sink
 
 
+def announce() -> None:
+    """Say on stderr which checkout is measured: each script puts its own first on the path, before PYTHONPATH."""
+    import localize
+
+    print(f"measuring localize {localize.__version__} from {Path(localize.__file__).parent}", file=sys.stderr)
+
+
 def run_jobs(run_one: Callable[[dict], dict], jobs: list[dict], workers: int = 2,
              json_path: Path | None = None) -> list[dict]:
     """``run_one`` on every job, in ``workers`` forked processes when more than one; the rows in the order they
     finish, each also appended to ``json_path`` (JSON lines) at once, so that a run cut short keeps what it did."""
-    import localize
-
-    # which checkout is measured: each script puts its own first on the path, before PYTHONPATH
-    print(f"measuring localize {localize.__version__} from {Path(localize.__file__).parent}", file=sys.stderr)
+    announce()
     rows: list[dict] = []
     sink = _claim(Path(json_path)) if json_path else None
 

@@ -31,9 +31,10 @@ sys.path.insert(0, str(HERE))
 
 import bench_global as bg  # noqa: E402
 import bench_state as bs  # noqa: E402
+from _util import announce  # noqa: E402
 
-import localize  # noqa: E402
 from localize import maps, pipeline, settings  # noqa: E402
+from localize.geometry import angle_diff  # noqa: E402
 from localize.placesearch import best_places, coarse_model  # noqa: E402
 from localize.raycast import RayCaster  # noqa: E402
 
@@ -59,7 +60,7 @@ def _search(grid, lf, coarse, truths, angles, rng) -> tuple[int, int, float]:
         t0 = time.perf_counter()
         places, _ = best_places(grid, lf, (z, angles), np.random.default_rng(i), coarse=coarse, n_best=N_BEST)
         seconds += time.perf_counter() - t0
-        dth = np.abs((places[:, 2] - x[2] + np.pi) % (2.0 * np.pi) - np.pi)
+        dth = np.abs(angle_diff(places[:, 2], x[2]))
         hit = (np.hypot(*(places[:, :2] - x[:2]).T) < 0.3) & (dth < 0.1)
         found += bool(hit.any())
         first += bool(hit[:1].any())
@@ -105,7 +106,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--write", action="store_true", help="write the bench_placesearch section of RESULTS.md")
     args = ap.parse_args(argv)
-    print(f"measuring localize {localize.__version__} from {Path(localize.__file__).parent}", file=sys.stderr)
+    announce()
     text = report(measure())
     print(text)
     if args.write:

@@ -387,13 +387,16 @@ class OccupancyGrid:
         y = self._origin[1] + (i + 0.5) * self._resolution
         return np.stack([x, y], axis=-1).astype(float)
 
-    def is_free(self, points: ArrayLike) -> NDArray[np.bool_]:
-        """True where a world point lies in a known-free cell (False outside the map)."""
+    def is_free(self, points: ArrayLike, *, holes: bool = False) -> NDArray[np.bool_]:
+        """True where a world point lies in a known-free cell (False outside the map); with ``holes``, in one of the
+        :attr:`holes` too."""
         cells = self.world_to_cell(points, outside="flag")
         i, j = cells[..., 0], cells[..., 1]
         ok = i >= 0
         out = np.zeros(i.shape, dtype=bool)
         out[ok] = self.free[i[ok], j[ok]]
+        if holes:
+            out[ok] |= self.holes[i[ok], j[ok]]
         return out
 
     def distance_at(self, points: ArrayLike, outside: float = np.nan) -> NDArray[np.float64]:

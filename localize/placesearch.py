@@ -84,11 +84,7 @@ def lattice(grid: OccupancyGrid, spacing: float, rng: np.random.Generator) -> ND
     off = rng.uniform(0.0, spacing, 2)
     gx, gy = np.meshgrid(np.arange(x0 + off[0], x1, spacing), np.arange(y0 + off[1], y1, spacing))
     xy = np.column_stack([gx.ravel(), gy.ravel()])
-    cells = grid.world_to_cell(xy, outside="flag")
-    inside = cells[:, 0] >= 0
-    ok = np.zeros(len(xy), dtype=bool)
-    ok[inside] = (grid.free | grid.holes)[cells[inside, 0], cells[inside, 1]]
-    return xy[ok]
+    return xy[grid.is_free(xy, holes=True)]
 
 
 def scores(sensor: Any, poses: NDArray, z: tuple) -> NDArray[np.float64]:

@@ -183,6 +183,8 @@ def test_sample_free_with_holes_draws_over_the_floor_and_its_holes_alike():
     cells = g.world_to_cell(p)
     in_hole = g.holes[cells[:, 0], cells[:, 1]]
     assert np.all(g.free[cells[:, 0], cells[:, 1]] | in_hole)           # never in a wall or the outside
+    assert np.array_equal(g.is_free(p, holes=True), np.ones(n, dtype=bool))
+    assert np.array_equal(g.is_free(p), ~in_hole)                        # is_free alone: the free cells only
     share = g.holes.sum() / (g.holes.sum() + g.free.sum())               # uniform per cell over both
     assert abs(in_hole.mean() - share) < 5 * np.sqrt(share * (1 - share) / n)
     # without holes: the free cells only

@@ -138,13 +138,13 @@ def test_a_robot_standing_in_a_hole_of_the_map_is_found_there(rooms):
     (``OccupancyGrid.holes``), and the robot's place is the best found on most seeds of the lattice's draw."""
     truth = np.array([4.0, 7.0, 0.5])
     data = np.array(rooms.data)
-    i, j = int(truth[1] / rooms.resolution), int(truth[0] / rooms.resolution)
+    i, j = rooms.world_to_cell(truth[:2])
     data[i - 15:i + 15, j - 15:j + 15] = np.nan
     holed = type(rooms)(data, rooms.resolution)
     assert holed.holes[i, j]
     xy = lattice(holed, 0.5, np.random.default_rng(0))
-    c = holed.world_to_cell(xy)
-    assert holed.holes[c[:, 0], c[:, 1]].sum() >= 30            # (3 m / 0.5 m)^2 = 36 lattice points in the hole
+    in_hole = holed.is_free(xy, holes=True) & ~holed.is_free(xy)
+    assert in_hole.sum() >= 30                                    # (3 m / 0.5 m)^2 = 36 lattice points in the hole
     lf = LikelihoodField(holed, 8.0, sigma_hit=0.1)
     z = _z(rooms, truth)                                          # the world has the floor the map leaves unknown
     coarse = coarse_model(holed, lf)
