@@ -570,7 +570,9 @@ class ReliabilityState:
       ``rivals`` (default), the estimate's share of the posterior against the
       other places where the scans since the place was chosen fit as well
       (:class:`localize.rivals.RivalBank`: a room and its mirror image hold it
-      at a half). A rival that becomes 19 times more probable than the
+      at a half; each rival's odds believed as far as the spread of its
+      per-scan differences supports them, :attr:`~localize.rivals.RivalBank.believed`).
+      A rival that becomes 19 times more probable than the
       estimate (the odds of ``localized_at``) takes its place: the run loop
       moves the cloud there (:meth:`take_switch`), the old place becomes a
       rival, and the belief starts again from even odds, as at any new place.

@@ -18,8 +18,22 @@ found,
 
 the histogram filter of chapter 2 over a handful of hypotheses, with the
 log-likelihoods ``l`` of chapter 6. The estimate's share of the posterior,
-``1 / (1 + sum_i exp(L_i))`` (even prior odds), is a third estimate of
-"am I localized?": a rival that fits as well holds it at a half. Rivals are
+``1 / (1 + sum_i exp(s_i L_i))`` (even prior odds), is a third estimate of
+"am I localized?": a rival that fits as well holds it at a half.
+
+The sensor model counts its beams as independent readings of an exact map;
+they are neither, and its log-likelihood ratios are too sure of themselves
+(a cupboard the map misplaces costs one place three nats at one scan, the
+other place at the next). The share believes each rival's odds only as far
+as its own per-scan differences support them: ``s_i`` is
+:func:`evidence_scale` of the bank's record of them, ``2 |mean| / variance``
+at most 1, from the identity that the variance of an exact Gaussian
+log-likelihood ratio is twice its mean (:attr:`RivalBank.believed`). A place
+that loses a few nats at every scan is believed in full; one whose
+differences swing by more than their mean is believed less. The move to a
+rival (below) is decided on the odds as they are: believed odds would move
+the cloud later, and on ``localize demo``'s office they kept a wrong cloud
+for longer (``benchmarks/RESULTS.md``, ``bench_global_experiments_stop61``). Rivals are
 found every ``every`` scans by a search over the whole map for the places where
 the newest scan fits best (:func:`localize.placesearch.best_places`), ranked
 again on the last ``window`` scans; a new rival starts with the log-odds of
@@ -85,7 +99,7 @@ from .grid import OccupancyGrid
 from .placesearch import best_places, climb_on, coarse_model, distinct, scores, stencil
 from .resample import logsumexp
 
-__all__ = ["RivalBank"]
+__all__ = ["RivalBank", "evidence_scale"]
 
 
 #: The small moves each hypothesis may take at every scan (itself, and 10 cm / 0.03 rad then half that, along each
@@ -97,6 +111,51 @@ TRACK_MOVES = np.vstack([np.zeros(3), stencil(0.1, 0.03, 2)])
 #: Places the search finds per rival kept: the newest scan alone ranks many look-alikes alike (every corner of
 #: a room fits a scan of a corner); the window of scans ranks them again, and the best are kept.
 SEARCHED = 4
+
+
+def _added(m: NDArray) -> NDArray[np.float64]:
+    """Row sums of ``m`` added column by column (the order in which the scans came)."""
+    total = np.zeros(m.shape[0])
+    for col in m.T:
+        total += col
+    return total
+
+
+def evidence_scale(d: ArrayLike) -> NDArray[np.float64]:
+    """How far to believe a sum of per-scan log-likelihood differences, from the differences themselves (per row).
+
+    If each difference ``d_t`` were an exact log-likelihood ratio, drawn as a
+    Gaussian ``N(mu, sigma^2)``, its variance would be ``2 |mu|`` (the
+    identity ``E[exp(-d)] = 1`` that every log-likelihood ratio obeys, for a
+    Gaussian). A sensor model that counts its beams as independent readings of
+    an exact map scatters its differences far wider than that: a cupboard the
+    map misplaces costs one place three nats at one scan and the other place
+    at the next. Read as Gaussian evidence with the mean and variance the
+    differences show, their sum is worth ``2 |mean| / variance`` times itself
+    (the log-likelihood ratio of ``N(mean, variance)`` against
+    ``N(-mean, variance)``), never more than the sensor model says (at most
+    1). Fewer than two differences (NaN: no record) say nothing of their own
+    spread: 1.
+
+    Examples
+    --------
+    >>> evidence_scale([[-3.0, -3.5, -2.5, -3.0]]).round(2)      # one place loses at every scan: the sum holds
+    array([1.])
+    >>> evidence_scale([[-3.0, 2.0, -4.0, 1.0]]).round(2)        # +-3 nats about -1: worth a quarter of it
+    array([0.23])
+    >>> evidence_scale([[np.nan, -6.0]]).round(2)                # one scan: no spread to judge by
+    array([1.])
+    """
+    d = np.atleast_2d(np.asarray(d, dtype=float))
+    n = np.sum(np.isfinite(d), axis=1)
+    out = np.ones(d.shape[0])
+    many = n >= 2
+    if many.any():
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.nanmean(d[many], axis=1)
+            var = np.nanvar(d[many], axis=1, ddof=1)
+            out[many] = np.where(var > 2.0 * np.abs(mean), 2.0 * np.abs(mean) / var, 1.0)
+    return out
 
 
 class RivalBank:
@@ -155,12 +214,21 @@ class RivalBank:
         self.scans: deque = deque(maxlen=self.history)     # (estimate, z) of the scans used since the place
         self.G = np.empty((0, 3))                          # each rival: robot at G ∘ estimate
         self.L = np.empty(0)                               # each rival's log-odds against the estimate
+        self.D = np.empty((0, 0))                          # each rival's per-scan differences, one column per scan
         self.used = 0
 
     @property
+    def believed(self) -> NDArray[np.float64]:
+        """Each rival's log-odds as far as its own per-scan differences support them: ``L`` times
+        :func:`evidence_scale` of its differences (``L`` itself for a rival without a record of them)."""
+        if self.D.shape[0] != len(self.L):        # odds set from outside (a test): no record to judge them by
+            return self.L.copy()
+        return self.L * evidence_scale(self.D)
+
+    @property
     def share(self) -> float:
-        """The estimate's posterior among itself and the rivals (1 with none)."""
-        return float(np.exp(-logsumexp(np.concatenate([[0.0], self.L]))))
+        """The estimate's posterior among itself and the rivals (1 with none), on the :attr:`believed` odds."""
+        return float(np.exp(-logsumexp(np.concatenate([[0.0], self.believed]))))
 
     def places(self, pose: NDArray) -> NDArray[np.float64]:
         """Where each rival puts the robot when the estimate is ``pose``: ``(R, 3)``."""
@@ -172,7 +240,10 @@ class RivalBank:
         Returns the estimate's :attr:`share`.
         """
         pose = np.asarray(pose, dtype=float)
+        if len(self.scans) == self.scans.maxlen:            # the oldest scan is forgotten, and its differences
+            self.D = self.D[:, 1:]
         self.scans.append((pose, z))
+        d = np.full(len(self.G), np.nan)
         if len(self.G):
             hyps = np.vstack([pose[None], self.places(pose)])
             cand = compose(hyps[:, None, :], TRACK_MOVES[None, :, :])             # (1 + R, M, 3)
@@ -180,8 +251,11 @@ class RivalBank:
             best = np.argmax(ll, axis=1)
             ll = ll[np.arange(len(hyps)), best]
             if np.isfinite(ll[0]):
-                self.L = self.L + (ll[1:] - ll[0])
-                self._keep(np.isfinite(self.L))             # a rival that left the map, or ran into a wall
+                d = ll[1:] - ll[0]
+                self.L = self.L + d
+        if self.D.shape[0] == len(self.G):
+            self.D = np.column_stack([self.D, d]) if len(self.G) else np.empty((0, self.D.shape[1] + 1))
+        self._keep(np.isfinite(self.L))                     # a rival that left the map, or ran into a wall
         self.used += 1
         if self.used % self.every == 0 or self.used <= 1:
             self.search(pose)
@@ -189,15 +263,21 @@ class RivalBank:
 
     def _keep(self, mask: NDArray[np.bool_]) -> None:
         self.G, self.L = self.G[mask], self.L[mask]
+        if self.D.shape[0] == len(mask):
+            self.D = self.D[mask]
+
+    def _scan_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None) -> NDArray[np.float64]:
+        """Log-likelihood ``(H, S)`` of each of the window's scans (or ``scans``) for hypotheses ``(H, 3)`` (poses
+        now) moved along ``shape`` (one pose per scan, in the frame of the estimate now)."""
+        scans = list(self.scans)[-self.window:] if scans is None else scans
+        ll = np.zeros((len(hyps), len(scans)))
+        for j, (_, z) in enumerate(scans):
+            ll[:, j] = scores(self.sensor, compose(hyps, shape[j][None]), z)
+        return ll
 
     def _window_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None) -> NDArray[np.float64]:
-        """Log-likelihood of the window's scans (or ``scans``) for hypotheses ``(H, 3)`` (poses now) moved along
-        ``shape`` (one pose per scan, in the frame of the estimate now)."""
-        scans = list(self.scans)[-self.window:] if scans is None else scans
-        ll = np.zeros(len(hyps))
-        for j, (_, z) in enumerate(scans):
-            ll += scores(self.sensor, compose(hyps, shape[j][None]), z)
-        return ll
+        """The sum of :meth:`_scan_ll` over the scans (added scan by scan)."""
+        return _added(self._scan_ll(hyps, shape, scans))
 
     def _climb(self, hyps: NDArray, shape: NDArray, iterations: int = 8) -> tuple[NDArray, NDArray]:
         """Hill-climb each hypothesis on the window's log-likelihood (:func:`localize.placesearch.climb_on`)."""
@@ -219,21 +299,28 @@ class RivalBank:
         if len(old) + len(found) == 0:
             return
         hyps, ll = self._climb(np.vstack([pose[None], old, found]), shape)   # the estimate climbed alike
-        est_ll, hyps, ll = ll[0], hyps[1:], ll[1:]
+        est_now, est_ll, hyps, ll = hyps[0], ll[0], hyps[1:], ll[1:]
         if not np.isfinite(est_ll):
             return
         n_old = len(old)
+        new = hyps[n_old:]
+        w = self._scan_ll(np.vstack([est_now[None], new]), shape)             # the new rivals' differences, scan
+        d_new = w[1:] - w[0]                                                   # by scan
         if len(self.scans) > self.window:      # a new rival is weighed on every scan since the place was chosen
             older = list(self.scans)[:-self.window]
             o_shape = relative(pose, every[:-self.window])
-            o_ll = self._window_ll(np.vstack([pose[None], hyps[n_old:]]), o_shape, older)
+            o = self._scan_ll(np.vstack([pose[None], new]), o_shape, older)
+            o_ll = _added(o)
             est_ll, ll = est_ll + o_ll[0], np.concatenate([ll[:n_old], ll[n_old:] + o_ll[1:]])
+            d_new = np.hstack([o[1:] - o[0], d_new])
         L = np.concatenate([self.L, ll[n_old:] - est_ll])
+        d_old = self.D if self.D.shape == (n_old, len(self.scans)) else np.full((n_old, len(self.scans)), np.nan)
+        D = np.vstack([d_old, d_new])
         ok = np.isfinite(L) & (np.hypot(*(hyps[:, :2] - pose[:2]).T) >= self.radius)
         G = compose(hyps, inverse(pose)[None])
         order = [i for i in np.argsort(-L) if ok[i]]
         kept = distinct(hyps, order, self.n_rivals, self.radius, heading=np.inf)   # distinct places, the best first
-        self.G, self.L = G[kept], L[kept]
+        self.G, self.L, self.D = G[kept], L[kept], D[kept]
 
     def winner(self) -> int | None:
         """The rival that should take the estimate's place (odds of ``switch_odds`` or more, over at least a
@@ -252,11 +339,13 @@ class RivalBank:
         others = np.arange(len(self.G)) != i
         self.G = np.vstack([compose(self.G[others], g_inv[None]), g_inv[None]])
         self.L = np.concatenate([self.L[others] - li, [-li]])
+        if self.D.shape[0] == len(others):
+            self.D = np.vstack([self.D[others] - self.D[i], -self.D[i]])
         self.scans = deque(((compose(g, p), z) for p, z in self.scans), maxlen=self.history)
         return g
 
     def clear(self) -> None:
         """Forget the rivals and the window (the estimate moved to a place the bank did not choose)."""
         self.scans.clear()
-        self.G, self.L = np.empty((0, 3)), np.empty(0)
+        self.G, self.L, self.D = np.empty((0, 3)), np.empty(0), np.empty((0, 0))
         self.used = 0

@@ -9,7 +9,7 @@ from localize import sim
 from localize.geometry import compose, inverse
 from localize.maps import symmetric_room
 from localize.raycast import RayCaster
-from localize.rivals import RivalBank
+from localize.rivals import RivalBank, evidence_scale
 from localize.sensors import LikelihoodField
 
 ANGLES = np.linspace(-np.pi, np.pi, 60, endpoint=False)
@@ -74,6 +74,60 @@ def test_switch_swaps_the_estimate_and_its_rival_and_rebases_the_others():
     assert bank.winner() is None
     bank.L = np.array([np.log(18.0), 0.0])           # below the odds: no switch
     assert bank.winner() is None
+
+
+def test_evidence_scale_believes_exact_log_likelihood_ratios_and_discounts_overconfident_ones():
+    """Readings x ~ N(0, 1) weighed for N(1, 1) against N(0, 1): the log-likelihood ratios d = x - 1/2 have mean
+    -1/2 and variance 1 = 2 |mean|, so their sum is believed in full. A model four times as sure of itself
+    (4 d: mean -2, variance 16) is believed a quarter: 2 |mean| / variance = 4 / 16. 2,000 readings: the
+    estimate's standard error is about 5% of it (delta method), the tolerance four times that; a formula without
+    the 2 (1/8, or 1/2 for the exact ratios) or with the standard deviation for the variance (1/2) fails."""
+    rng = np.random.default_rng(0)
+    d = rng.normal(0.0, 1.0, 2000) - 0.5
+    exact, sure = evidence_scale(np.vstack([d, 4.0 * d]))
+    assert exact > 1.0 - 4 * 0.05
+    assert abs(sure - 0.25) < 4 * 0.05 * 0.25
+    # no record, or a single scan: nothing to judge the spread by
+    assert np.array_equal(evidence_scale([[np.nan, np.nan], [np.nan, -40.0]]), [1.0, 1.0])
+
+
+def test_the_share_counts_a_rivals_odds_as_far_as_its_differences_support_them():
+    """Two rivals 6 nats down after four scans: one lost about 1.5 nats at every scan (believed: share 0.995 of
+    the two alike), the other lost 14 and won 8, 5 and 1 (about a third believed: the estimate's share is lower).
+    A switch keeps every record: the differences against the new estimate are the old ones minus the winner's."""
+    grid = symmetric_room(tell=False)
+    bank = RivalBank(grid, _lf(grid), switch_odds=19.0)
+    x = np.array([2.0, 4.5, 0.3])
+    bank.scans.extend([(x, None)] * 4)
+    bank.G = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.5]])
+    bank.D = np.array([[-1.5, -1.6, -1.4, -1.5], [-14.0, 8.0, 5.0, -5.0]])
+    bank.L = bank.D.sum(axis=1)
+    scale = evidence_scale(bank.D)
+    assert scale[0] == 1.0 and 0.0 < scale[1] < 0.5
+    assert np.allclose(bank.believed, bank.L * scale)
+    assert bank.share == pytest.approx(1.0 / (1.0 + np.exp(bank.L[0]) + np.exp(bank.L[1] * scale[1])))
+    assert bank.share < 1.0 / (1.0 + 2.0 * np.exp(-6.0))
+    before = bank.D.copy()
+    bank.switch(1)
+    assert np.allclose(bank.D, [before[0] - before[1], -before[1]])
+    assert np.allclose(bank.L, bank.D.sum(axis=1))
+    # odds set without a record (a caller's own): believed as they are
+    bank.L = np.array([2.0, -1.0, 0.5])
+    assert np.array_equal(bank.believed, bank.L)
+
+
+def test_the_record_of_differences_follows_the_scans_the_bank_keeps():
+    """Every scan adds one difference per rival; a rival dropped drops its record; the oldest scan forgotten
+    (``history``) forgets its column; the record's row sums are the odds when the bank kept every scan."""
+    grid = symmetric_room(tell=False)
+    lf = _lf(grid)
+    bank = RivalBank(grid, lf, every=5, history=12, seed=0)
+    path = np.array([[1.0 + 0.3 * k, 1.0 + 0.1 * k, 0.0] for k in range(16)])
+    for k, x in enumerate(path):
+        bank.observe(x, _z(grid, x))
+        assert bank.D.shape == (len(bank.L), len(bank.scans)), (k, bank.D.shape, len(bank.L), len(bank.scans))
+        if k < 12:
+            assert np.allclose(np.nansum(bank.D, axis=1), bank.L, atol=1e-6), k
 
 
 def test_bad_arguments_say_what_is_wrong():
