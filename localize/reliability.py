@@ -52,11 +52,10 @@ the command line's default until stop 53, does no better on any of these
 chosen on (``benchmarks/bench_state.py``: generated grids of alike rooms,
 halls of boxes, the office and the symmetric hall, each seen by four kinds
 of laser), the probability errs the other way from the real logs: it is
-over-confident. Of the scans it calls localized, 7.0% and 2.4% (two draws)
-are more than 1 m off (the threshold state: 10.0% and 8.3%; three more draws of
-the probability: 7.7%, 3.5% and 4.6%), most of them in the symmetric hall and the
-grids of alike rooms, and at ``p_localized`` 0.6-0.9 the estimate is right
-0.18-0.37 less often than it says. The cause is mostly the bank's, not the
+over-confident. Of the scans it calls localized, 7.1% and 2.7% (two draws, stop
+61) are more than 1 m off (the threshold state: 10.0% and 8.3%), most of them in
+the symmetric hall and the grids of alike rooms, and at ``p_localized`` 0.7-0.9
+the estimate is right 0.26-0.38 less often than it says. The cause is mostly the bank's, not the
 calibration's (``bench_global_experiments_stop55``): it scores the estimate,
 which the filter keeps where the scans fit best, against rivals that follow
 it rigidly and are re-placed only every few scans, so a rival on the robot's
@@ -68,9 +67,11 @@ Measured against the truth (``benchmarks/why_wrong.py``,
 that barely tell the two places apart (a few nats over tens of scans, either
 way): a bank that held the robot's place and weighed it as fairly as the
 estimate would leave *localized* possible at about a fifth of them (draw 0:
-117 of 537). In the demo's office it is the other way: at 65 of its 73 wrong
-claims the robot's true path fits the scans worse than the estimate under the
-filter's own sensor model, and no bank can help there.
+117 of 537). In the demo's office it is the other way: at 53 of its 55 wrong
+claims (seeds 0-9, more than 0.5 m off; 74 before the bank believed its odds
+only as far as their spread supports them) the robot's true path fits the
+scans worse than the estimate under the filter's own sensor model, and no bank
+can help there.
 
 This follows the reliability estimation of Akai et al. (*Reliable Monte Carlo
 localization for mobile robots*, 2023; als_ros), where a classifier's output

@@ -238,7 +238,8 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # %% [markdown]
 # The benchmark's goal — 95% success on every log — is reached on all five
 # logs: Intel (100%), Freiburg 079 (98%), ACES (95%, 57 of 60: no run to
-# spare), CSAIL (100%) and the simulated Willow runs (97%).
+# spare), CSAIL (100%) and the simulated Willow runs (95%, 57 of 60, just as
+# tight).
 # Each default named above is there for one of these failures. They were
 # measured when the threshold state was the default, each against the
 # threshold state's run of the same draw (the section
@@ -284,15 +285,16 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 #
 # What the table does show is honesty: no run ended "localized" while more
 # than 1 m off, and all 300 runs ended localized within 1 m of the robot. Of
-# the six failures, three found it only after the first 30% of the run, and
-# three localized within five scans but did not stay within the success band.
-# The last column is stricter: three runs (one on ACES, two on Willow) called
-# a wrong place "localized" at some scans, 9 of the 83,831 scans called
-# localized in all (the table below it, scan by scan). The threshold state's
-# run of the same draw calls more of them localized while more than 1 m off
-# (23), and says "localized" at only 93.9% of the scans within 0.3 m of the
-# truth (after the first localized scan), where the probability says it at
-# 98.7%: the threshold state is lost far more often while right. The next cell checks these
+# the seven failures, three found it only after the first 30% of the run, and
+# four localized within it (three ACES runs within five scans) but did not
+# stay within the success band. The last column is stricter: two runs (one on
+# ACES, one on Willow) called a wrong place "localized" at some scans, 2 of the
+# 83,577 scans called localized in all (the table below it, scan by scan). The
+# threshold state's run of the same draw calls more of them localized while
+# more than 1 m off (23), and says "localized" at only 93.9% of the scans
+# within 0.3 m of the truth (after the first localized scan), where the
+# probability says it at 98.6%: the threshold state is lost far more often
+# while right. The next cell checks these
 # statements against the tables, so that a re-run of the benchmark cannot
 # silently contradict them.
 
@@ -303,16 +305,16 @@ if section:
         ok, runs = cells[2].split()[0].split("/")
         rows[name] = dict(success=int(ok) / int(runs), off=int(cells[9]))
     assert {"intel", "freiburg-079", "aces", "csail", "willow"} <= set(rows), sorted(rows)
-    claims = {"intel": 1.0, "freiburg-079": 0.98, "aces": 0.95, "csail": 1.0, "willow": 0.97}
+    claims = {"intel": 1.0, "freiburg-079": 0.98, "aces": 0.95, "csail": 1.0, "willow": 0.95}
     for log_name, rate in claims.items():
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
-    assert rows["aces"]["success"] == 57 / 60
+    assert rows["aces"]["success"] == rows["willow"]["success"] == 57 / 60
     assert all(r["off"] == 0 for r in rows.values())
     assert sum(int(cells[8]) for cells in table_rows(section).values()) == 300    # every run ended localized
     some_scan = {name: int(cells[10]) for name, cells in table_rows(section).items()}
-    assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 1, "csail": 0, "willow": 2}, some_scan
+    assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 1, "csail": 0, "willow": 1}, some_scan
     scans_section = table_rows(section, 1)["all"]   # the scan-by-scan table's row "all"
-    assert scans_section[2] == "83831" and scans_section[3].startswith("9 ") and "(98.7%)" in scans_section[5], \
+    assert scans_section[2] == "83577" and scans_section[3].startswith("2 ") and "(98.6%)" in scans_section[5], \
         scans_section
     thresholds = results_section("bench_global_state_thresholds")
     t_rows = {name: cells[2].split()[0] for name, cells in table_rows(thresholds).items()}
@@ -372,11 +374,11 @@ print(held_out or "benchmarks/RESULTS.md has no bench_global_held_out section ye
 # unknown patches of open floor) does not find them: the square covers walls
 # as well as floor, and the scans there fit the map poorly wherever the
 # particles are. The honesty holds on this draw as well: no run ended
-# "localized" more than 1 m off; ten runs (one on Freiburg 079, three each on
-# ACES, CSAIL and Willow) called a wrong place "localized" at some scans, 123
-# of the 83,107 scans called localized (0.15%; the threshold state 29, 0.04%),
-# and 99.1% of the scans within 0.3 m said "localized" (the threshold state
-# 94.0%).
+# "localized" more than 1 m off; eight runs (one on Freiburg 079 and on ACES,
+# three each on CSAIL and Willow) called a wrong place "localized" at some
+# scans, 53 of the 82,941 scans called localized (0.06%; the threshold state
+# 29, 0.04%), and 99.1% of the scans within 0.3 m said "localized" (the
+# threshold state 94.0%).
 
 # %% tags=["remove-cell"]
 if held_out:
@@ -386,9 +388,9 @@ if held_out:
     assert rates["willow"] == "51/60" and rates["csail"] == rates["freiburg-079"] == "57/60", rates   # 85%, 95%
     assert all(int(cells[9]) == 0 for cells in table_rows(held_out).values())
     some_scan = {name: int(cells[10]) for name, cells in table_rows(held_out).items()}
-    assert some_scan == {"intel": 0, "freiburg-079": 1, "aces": 3, "csail": 3, "willow": 3}, some_scan
+    assert some_scan == {"intel": 0, "freiburg-079": 1, "aces": 1, "csail": 3, "willow": 3}, some_scan
     scans_held_out = table_rows(held_out, 1)["all"]   # the scan-by-scan table's row "all"
-    assert scans_held_out[2] == "83107" and scans_held_out[3].startswith("123 ") and "(99.1%)" in scans_held_out[5], \
+    assert scans_held_out[2] == "82941" and scans_held_out[3].startswith("53 ") and "(99.1%)" in scans_held_out[5], \
         scans_held_out
     t_held_out = results_section("bench_global_held_out_state_thresholds")
     assert table_rows(t_held_out)["willow"][2].startswith("52/60")
@@ -412,18 +414,21 @@ for name, draw in (("bench_state", "standard draw"), ("bench_state_held_out", "h
 
 # %% [markdown]
 # Both states are far less honest there than on the real logs: of the scans
-# the probability calls localized, 8.4% and 3.1% are more than 1 m off (the
+# the probability calls localized, 7.1% and 2.7% are more than 1 m off (the
 # threshold state: 10.0% and 8.3%), most of them in the symmetric hall and
 # the grids of alike rooms. A building of many alike rooms holds more
 # look-alikes than the rival bank keeps, and a new place starts at even odds
 # whatever the building: there `p_localized` says more than it knows, where on
 # the real logs it says less. The sections `bench_state` and
 # `bench_state_held_out` of `benchmarks/RESULTS.md` hold the tables by
-# building and by laser, and `bench_global_experiments_stop54` what they
-# suggest and what did not work.
+# building and by laser, `bench_global_experiments_stop54` what they
+# suggest and what did not work, and `bench_global_experiments_stop61` why
+# the two benchmarks ask for opposite corrections (believing each rival's
+# odds only as far as its own scan-by-scan differences support them lowered
+# these shares from 8.4% and 3.1%).
 
 # %% tags=["remove-cell"]
-for name, wrong in (("bench_state", ("(8.4%)", "(10.0%)")), ("bench_state_held_out", ("(3.1%)", "(8.3%)"))):
+for name, wrong in (("bench_state", ("(7.1%)", "(10.0%)")), ("bench_state_held_out", ("(2.7%)", "(8.3%)"))):
     cells = table_rows(results_section(name)).get("all")
     if cells:
         assert (cells[4].split()[-1], cells[8].split()[-1]) == wrong, (name, cells)
