@@ -125,9 +125,10 @@ def evidence_scale(d: ArrayLike) -> NDArray[np.float64]:
     """How far to believe a sum of per-scan log-likelihood differences, from the differences themselves (per row).
 
     If each difference ``d_t`` were an exact log-likelihood ratio, drawn as a
-    Gaussian ``N(mu, sigma^2)``, its variance would be ``2 |mu|`` (the
-    identity ``E[exp(-d)] = 1`` that every log-likelihood ratio obeys, for a
-    Gaussian). A sensor model that counts its beams as independent readings of
+    Gaussian ``N(mu, sigma^2)``, its variance would be ``2 |mu|``: every
+    log-likelihood ratio ``d = log p1(z) - log p0(z)`` obeys ``E[exp(d)] = 1``
+    for ``z`` drawn from ``p0`` (and ``E[exp(-d)] = 1`` from ``p1``), and for a
+    Gaussian that says ``mu + sigma^2 / 2 = 0``. A sensor model that counts its beams as independent readings of
     an exact map scatters its differences far wider than that: a cupboard the
     map misplaces costs one place three nats at one scan and the other place
     at the next. Read as Gaussian evidence with the mean and variance the
