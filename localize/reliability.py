@@ -769,14 +769,14 @@ class ReliabilityState:
         if not (step.updated and step.n_valid > 0 and isinstance(step.z, tuple) and len(step.z) == 2
                 and mass > 0.5 and not (step.degenerate or step.off_map)):
             return self.rivals.share
-        self.rivals.observe(step.pose, step.z)
+        share = self.rivals.observe(step.pose, step.z)     # of this step's estimate, before any move
         i = self.rivals.winner()
         # a rival won while the scans still fit the estimate as a right place's do (the belief, and this scan
         # alone, say right more probably than wrong): two places that both fit, the look-alike problem. When the
         # estimate stops fitting, the filter failed, and finding the robot again is the restarts' business.
         fits = self.belief.p > 0.5 and self.model.posterior(step.evidence) > 0.5
         self.pending = i if i is not None and fits else None
-        return self.rivals.share                        # of this step's estimate, before any move
+        return share
 
     def take_switch(self, allowed: bool = True) -> NDArray | None:
         """The transform to move the cloud by when a rival won at this step (:class:`localize.rivals.RivalBank`),

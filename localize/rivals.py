@@ -255,7 +255,7 @@ class RivalBank:
                 d = ll[1:] - ll[0]
                 self.L = self.L + d
         if self.D.shape[0] == len(self.G):
-            self.D = np.column_stack([self.D, d]) if len(self.G) else np.empty((0, self.D.shape[1] + 1))
+            self.D = np.column_stack([self.D, d])
         self._keep(np.isfinite(self.L))                     # a rival that left the map, or ran into a wall
         self.used += 1
         if self.used % self.every == 0 or self.used <= 1:
