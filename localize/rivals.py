@@ -218,12 +218,21 @@ class RivalBank:
         self.D = np.empty((0, 0))                          # each rival's per-scan differences, one column per scan
         self.used = 0
 
+    def hold(self, G: ArrayLike, L: ArrayLike, D: ArrayLike | None = None) -> None:
+        """Hold the rivals ``G`` (``(R, 3)``) with log-odds ``L`` (``(R,)``) against the estimate, and their
+        per-scan differences ``D`` (``(R, S)``, one column per scan the bank keeps; default: no record, NaN,
+        so that their odds are believed as they are). A rival placed by hand (a test, a caller's guess) starts here."""
+        G, L = np.atleast_2d(np.asarray(G, dtype=float)).reshape(-1, 3), np.asarray(L, dtype=float).reshape(-1)
+        D = np.full((len(G), len(self.scans)), np.nan) if D is None else np.asarray(D, dtype=float)
+        if len(L) != len(G) or D.shape != (len(G), len(self.scans)):
+            raise ValueError(f"need G (R, 3), L (R,) and D (R, {len(self.scans)}: one column per scan kept); got "
+                             f"{G.shape}, {L.shape} and {D.shape}")
+        self.G, self.L, self.D = G, L, D
+
     @property
     def believed(self) -> NDArray[np.float64]:
         """Each rival's log-odds as far as its own per-scan differences support them: ``L`` times
         :func:`evidence_scale` of its differences (``L`` itself for a rival without a record of them)."""
-        if self.D.shape[0] != len(self.L):        # odds set from outside (a test): no record to judge them by
-            return self.L.copy()
         return self.L * evidence_scale(self.D)
 
     @property
@@ -254,8 +263,7 @@ class RivalBank:
             if np.isfinite(ll[0]):
                 d = ll[1:] - ll[0]
                 self.L = self.L + d
-        if self.D.shape[0] == len(self.G):
-            self.D = np.column_stack([self.D, d])
+        self.D = np.column_stack([self.D, d])
         self._keep(np.isfinite(self.L))                     # a rival that left the map, or ran into a wall
         self.used += 1
         if self.used % self.every == 0 or self.used <= 1:
@@ -263,9 +271,7 @@ class RivalBank:
         return self.share
 
     def _keep(self, mask: NDArray[np.bool_]) -> None:
-        self.G, self.L = self.G[mask], self.L[mask]
-        if self.D.shape[0] == len(mask):
-            self.D = self.D[mask]
+        self.G, self.L, self.D = self.G[mask], self.L[mask], self.D[mask]
 
     def _scan_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None) -> NDArray[np.float64]:
         """Log-likelihood ``(H, S)`` of each of the window's scans (or ``scans``) for hypotheses ``(H, 3)`` (poses
@@ -315,8 +321,7 @@ class RivalBank:
             est_ll, ll = est_ll + o_ll[0], np.concatenate([ll[:n_old], ll[n_old:] + o_ll[1:]])
             d_new = np.hstack([o[1:] - o[0], d_new])
         L = np.concatenate([self.L, ll[n_old:] - est_ll])
-        d_old = self.D if self.D.shape == (n_old, len(self.scans)) else np.full((n_old, len(self.scans)), np.nan)
-        D = np.vstack([d_old, d_new])
+        D = np.vstack([self.D, d_new])
         ok = np.isfinite(L) & (np.hypot(*(hyps[:, :2] - pose[:2]).T) >= self.radius)
         G = compose(hyps, inverse(pose)[None])
         order = [i for i in np.argsort(-L) if ok[i]]
@@ -340,8 +345,7 @@ class RivalBank:
         others = np.arange(len(self.G)) != i
         self.G = np.vstack([compose(self.G[others], g_inv[None]), g_inv[None]])
         self.L = np.concatenate([self.L[others] - li, [-li]])
-        if self.D.shape[0] == len(others):
-            self.D = np.vstack([self.D[others] - self.D[i], -self.D[i]])
+        self.D = np.vstack([self.D[others] - self.D[i], -self.D[i]])
         self.scans = deque(((compose(g, p), z) for p, z in self.scans), maxlen=self.history)
         return g
 

@@ -58,10 +58,10 @@ def test_switch_swaps_the_estimate_and_its_rival_and_rebases_the_others():
     grid = symmetric_room(tell=False)
     bank = RivalBank(grid, _lf(grid), switch_odds=19.0)
     x = np.array([2.0, 4.5, 0.3])
-    bank.G = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.5]])
-    bank.L = np.array([np.log(30.0), -1.0])
+    bank.hold([[1.0, 0.0, 0.0], [0.0, 2.0, 0.5]], [np.log(30.0), -1.0])
     assert bank.winner() is None              # odds won over fewer scans than a window: not yet
     bank.scans.extend([(x, None)] * bank.window)
+    bank.hold(bank.G, bank.L)                 # the same rivals and odds, over the window's scans
     assert bank.winner() == 0
     where_before = bank.places(x)
     g = bank.switch(0)
@@ -72,7 +72,7 @@ def test_switch_swaps_the_estimate_and_its_rival_and_rebases_the_others():
     assert np.allclose(after[0], where_before[1]) and np.allclose(after[1], x)
     assert np.allclose(bank.L, [-1.0 - np.log(30.0), -np.log(30.0)])
     assert bank.winner() is None
-    bank.L = np.array([np.log(18.0), 0.0])           # below the odds: no switch
+    bank.hold(bank.G, [np.log(18.0), 0.0])           # below the odds: no switch
     assert bank.winner() is None
 
 
@@ -99,9 +99,8 @@ def test_the_share_counts_a_rivals_odds_as_far_as_its_differences_support_them()
     bank = RivalBank(grid, _lf(grid), switch_odds=19.0)
     x = np.array([2.0, 4.5, 0.3])
     bank.scans.extend([(x, None)] * 4)
-    bank.G = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.5]])
-    bank.D = np.array([[-1.5, -1.6, -1.4, -1.5], [-14.0, 8.0, 5.0, -5.0]])
-    bank.L = bank.D.sum(axis=1)
+    D = np.array([[-1.5, -1.6, -1.4, -1.5], [-14.0, 8.0, 5.0, -5.0]])
+    bank.hold([[1.0, 0.0, 0.0], [0.0, 2.0, 0.5]], D.sum(axis=1), D)
     scale = evidence_scale(bank.D)
     assert scale[0] == 1.0 and 0.0 < scale[1] < 0.5
     assert np.allclose(bank.believed, bank.L * scale)
@@ -112,8 +111,10 @@ def test_the_share_counts_a_rivals_odds_as_far_as_its_differences_support_them()
     assert np.allclose(bank.D, [before[0] - before[1], -before[1]])
     assert np.allclose(bank.L, bank.D.sum(axis=1))
     # odds set without a record (a caller's own): believed as they are
-    bank.L = np.array([2.0, -1.0, 0.5])
+    bank.hold(bank.G, [2.0, -1.0])
     assert np.array_equal(bank.believed, bank.L)
+    with pytest.raises(ValueError, match=r"one column per scan kept"):
+        bank.hold(bank.G, bank.L, np.zeros((2, 2)))
 
 
 def test_the_record_of_differences_follows_the_scans_the_bank_keeps():
@@ -187,7 +188,7 @@ def test_a_switch_waits_out_a_probation_and_is_taken_once():
     grid = symmetric_room(tell=False)
     state = ReliabilityState(grid, _lf(grid))
     x = np.array([2.0, 4.5, 0.3])
-    state.rivals.G, state.rivals.L = np.array([[1.0, 0.0, 0.0]]), np.array([5.0])
+    state.rivals.hold([[1.0, 0.0, 0.0]], [5.0])
     state.last_pose = x.copy()
     state.pending = 0
     assert state.take_switch(allowed=False) is None
@@ -215,8 +216,7 @@ def test_a_rival_a_little_off_the_mirror_image_does_not_make_the_bank_sure_of_a_
     path = np.array([[1.0 + 0.2 * k, 1.0 + 0.05 * k, 0.02 * k] for k in range(40)])
     bank = RivalBank(grid, _lf(grid), seed=1)
     x0 = path[0]
-    bank.G = compose(compose(compose(CENTRE_TURN, x0), np.array([0.1, -0.1, 0.05])), inverse(x0))[None]
-    bank.L = np.zeros(1)
+    bank.hold(compose(compose(compose(CENTRE_TURN, x0), np.array([0.1, -0.1, 0.05])), inverse(x0))[None], [0.0])
     bank.used = 1                                     # the first search (at the first scan) has been made
     for x in path:
         share = bank.observe(x, _z(grid, x))
