@@ -253,7 +253,9 @@ STATE_MEANING = ("p_localized: the probability that the estimate is within 1 m o
                  "the map there (calibrated at start-up on this map and sensor model), the particles' own mass "
                  "near it, and its share against the look-alike places kept as rivals "
                  f"(localize.reliability.ReliabilityState); localized: p_localized reached {LOCALIZED_AT}; "
-                 f"lost: it was localized and p_localized fell below {LOST_BELOW}; searching: never localized yet")
+                 f"lost: it was localized and p_localized fell below {LOST_BELOW}, or the particles' mass and the "
+                 f"rivals' share alone no longer allowed {LOCALIZED_AT} (another place probable); searching: never "
+                 "localized yet")
 
 
 def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, settings: dict,

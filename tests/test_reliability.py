@@ -226,6 +226,42 @@ def test_the_state_follows_p_localized_and_a_jump_starts_a_new_hypothesis():
     assert not state.jumped(_Step(12, truth + [0.3, 0, 0], tight))
 
 
+def test_the_margin_forgives_a_poor_fit_but_not_another_place():
+    """A localized filter stays localized through a scan that fits poorly (``p_localized`` between the two
+    thresholds, the place part ``m`` still 1), and turns lost when a sixth of the cloud's weight gathers 3 m away
+    while the scans still fit the estimate: ``p_localized`` is still above ``LOST_BELOW``, but with a sure belief
+    it could be at most ``sqrt(m)``, below ``LOCALIZED_AT``. The old margin, on ``p_localized`` alone, kept it
+    localized there."""
+    from localize.reliability import LOCALIZED_AT, LOST_BELOW, ReliabilityState
+
+    g = office()
+    lf = LikelihoodField(g, 8.0, sigma_hit=0.1, z_hit=0.9, z_rand=0.1)
+    rng = np.random.default_rng(7)
+    state = ReliabilityState(g, lf, probe_shift=0.0, rivals=False)
+    ctx = _Ctx()
+    truth = np.array([3.0, 3.0, 1.0])
+    tight = (np.tile(truth, (120, 1)) + rng.normal(0, 0.05, (120, 3)), np.full(120, -np.log(120)))
+    for k in range(8):
+        state.update(_Step(k, truth, tight, fit_scan=_scan_at(truth, lf, rng)), ctx)
+    assert ctx.state == "localized"
+    for k in range(8, 12):                                       # scans that fit poorly, until p dips below
+        st = _Step(k, truth, tight, fit_scan=_scan_at(truth + [3.0, 0.0, 1.5], lf, rng))
+        state.update(st, ctx)
+        if st.p_localized < LOCALIZED_AT:
+            break
+    assert LOST_BELOW <= st.p_localized < LOCALIZED_AT and state.place_limit == 1.0 and ctx.state == "localized"
+    for k in range(12, 16):                                      # the fit recovers: the belief rises again
+        state.update(_Step(k, truth, tight, fit_scan=_scan_at(truth, lf, rng)), ctx)
+    assert ctx.state == "localized"
+    split = tight[0].copy()
+    split[:20] += [3.0, 0.0, 0.0]                                # 20 of 120 particles, a sixth, 3 m away
+    st = _Step(16, truth, (split, tight[1]), fit_scan=_scan_at(truth, lf, rng))
+    state.update(st, ctx)
+    assert st.p_localized >= LOST_BELOW                          # the old margin would have kept it localized
+    assert state.place_limit == pytest.approx(np.sqrt(100 / 120)) and ctx.state == "lost"
+    assert "another place is probable" in ctx.events[-1][1]
+
+
 def test_a_corridor_never_pins_the_estimate():
     """Scans in a long featureless corridor fit the estimate moved along it as well: the probe's mass stays near a
     third (estimate, one metre ahead, one behind) however many scans come, and the state never says localized."""
@@ -282,7 +318,8 @@ def test_the_command_line_states_the_thresholds_the_state_uses():
 
     text = " ".join({f.name: f for f in dataclasses.fields(settings.RunSettings)}["state"].metadata["cli_help"].split())
     assert f"localized at {LOCALIZED_AT}, lost below {LOST_BELOW}; restarts when it stays below {LOST_BELOW}" in text
-    assert f"reached {LOCALIZED_AT};" in cli.STATE_MEANING and f"fell below {LOST_BELOW};" in cli.STATE_MEANING
+    assert f"reached {LOCALIZED_AT};" in cli.STATE_MEANING and f"fell below {LOST_BELOW}," in cli.STATE_MEANING
+    assert f"no longer allow {LOCALIZED_AT}" in text and f"no longer allowed {LOCALIZED_AT}" in cli.STATE_MEANING
     state = ReliabilityState(office(), LikelihoodField(office(), 8.0, sigma_hit=0.2))
     assert (state.localized_at, state.lost_below) == (LOCALIZED_AT, LOST_BELOW)
 

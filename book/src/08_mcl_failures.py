@@ -709,8 +709,14 @@ assert scales[0] > 0.8 and abs(scales[1] - 0.25) < 0.05     # about 1 and 1/4 (5
 # probability, each from other evidence. Multiplied, they would count the
 # doubt twice: two estimates of 0.7 give 0.49. `p_localized` is their
 # **geometric mean**, $\sqrt{b\,m}$, which counts it once; the state is
-# *localized* once it reaches 0.95 and *lost* when a localized filter's falls
-# below 0.7.
+# *localized* once it reaches 0.95. A localized filter turns *lost* when it
+# falls below 0.7, or as soon as $m$ alone no longer allows 0.95
+# ($\sqrt{m} < 0.95$: no belief, however sure, would make the claim). The
+# margin between 0.95 and 0.7 is for the fit: where the map is wrong, a
+# right place's scans fit poorly for a while and $b$ dips, and a state that
+# turned lost at every dip would cry wolf. A share of the probability at
+# another place is not such a dip, and *localized* is a claim about the
+# place.
 #
 # **Is it calibrated?** A probability is honest when, of all the steps at
 # which it says 0.8, about 80 % are right. Take the four kidnapped robots
@@ -725,9 +731,11 @@ for seed, (r_s, tr_s) in runs.items():
     rights.append(e_s <= 1.0)
     off = np.flatnonzero((tr_s.state == "localized") & (e_s > 1.0))
     moved = [k for k, text in tr_s.events if "rival place" in text]
+    placed = [k for k, text in tr_s.events if "another place is probable" in text]
     print(f"robot {seed}: {off.size:2d} steps called localized while more than 1 m off"
           + (f" (steps {off[0]}-{off[-1]}, up to {e_s[off].max():.0f} m)" if off.size else "")
-          + (f"; the cloud moved to a rival place at step {', '.join(map(str, moved))}" if moved else ""))
+          + (f"; the cloud moved to a rival place at step {', '.join(map(str, moved))}" if moved else "")
+          + (f"; lost at step {', '.join(map(str, placed))}: another place probable" if placed else ""))
     late = off[off >= KIDNAP + 5]
     if late.size:
         print(f"         after step {KIDNAP + 5}: steps {late[0]}-{late[-1]}, p_localized "
@@ -738,31 +746,28 @@ for lo, hi, n_bin, mean_p, share in rows:
     print(f"p_localized {lo:.1f}-{hi:.1f}: {n_bin:3d} steps, mean p {mean_p:.2f}, right {share:.2f}")
 sure = ps >= LOCALIZED_AT
 print(f"steps with p_localized >= {LOCALIZED_AT}: {sure.sum()}, of them more than 1 m off: {np.sum(~rights[sure])}")
-for seed, (r_s, tr_s) in runs.items():    # the kidnapping's first steps, or a wrong place the bank then left (text)
+for seed, (r_s, tr_s) in runs.items():
     off = np.flatnonzero((tr_s.state == "localized") & (position_error(tr_s.poses, r_s.poses) > 1))
-    moved = [k for k, text in tr_s.events if "rival place" in text]
-    late = off[off >= KIDNAP + 5]
-    assert np.all(off >= KIDNAP) and np.sum(off < KIDNAP + 5) <= 5, (seed, off)
-    assert late.size == 0 or (moved and late[-1] < moved[-1]), (seed, off, moved)
+    assert np.all(off >= KIDNAP) and np.all(off < KIDNAP + 5), (seed, off)       # the kidnapping's first steps only
+lost_by_place = [k for k, text in runs[0][1].events if "another place is probable" in text]
+assert lost_by_place and KIDNAP <= lost_by_place[0] < KIDNAP + 5          # robot 0: the second rule, at once
 assert 0.7 < np.mean(rights[sure]) < 0.99                           # "sure" is mostly, not always, right
 
 # %% [markdown]
-# Robots 1 and 3 are called *localized* while more than a metre off only in
-# the first steps after the kidnapping: a belief built on many good scans
-# gives way only after a few poor ones, the arithmetic above. Robot 0 shows
-# the case the rival bank is for. After its restart, the new particles
-# settled on a place far from the robot whose first scans fitted well, and
-# the bank had not found the robot's place yet: the state said *localized*.
-# Two steps later the bank held the true place as a rival; as the scans told
-# the two apart, the estimate's share fell, and the bank moved the cloud to
-# the robot (the line above gives the steps). Meanwhile the state stayed
-# *localized* with `p_localized` well below 0.95 (the second line of robot 0
-# gives how far): a localized filter turns *lost* only below 0.7, and the
-# geometric mean of a sure belief and a share of one half is 0.71. A place
-# chosen on a few scans, before any search has looked for its look-alikes,
-# is the weak point of this state. What the probability still gets wrong is
-# named by the state tests of `tests/test_state_scenarios.py` (in a long
-# featureless corridor, four rivals are not the corridor's continuum of
+# Every robot is called *localized* while more than a metre off only in
+# the first steps after its kidnapping: a belief built on many good scans
+# gives way only after a few poor ones, the arithmetic above. Robot 0 turned
+# *lost* by the second rule (its line above): one step after the
+# kidnapping, the place part no longer allowed 0.95. The rule matters most
+# after a restart. The new particles may settle on a place whose first scans
+# fit well, before any search has looked for its look-alikes; when the bank
+# finds the robot's place as a rival and the scans begin to tell the two
+# apart, the estimate's share falls. With a sure belief and a share of one
+# half, `p_localized` is $\sqrt{0.5} = 0.71$, above the 0.7 at which a
+# localized filter turns lost: the margin alone would keep the claim, and
+# the share alone allows at most 0.71. What the probability still
+# gets wrong is named by the state tests of `tests/test_state_scenarios.py`
+# (in a long featureless corridor, four rivals are not the corridor's continuum of
 # look-alikes) and measured on real logs and maps that none of this was
 # chosen on (`benchmarks/RESULTS.md`, `bench_global_state_probability`).
 # The command line uses this state by default; `localize run --state

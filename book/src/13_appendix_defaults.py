@@ -158,8 +158,10 @@ folder = Path(tempfile.mkdtemp())
 #   whose $p(\text{fit} \mid \text{right})$ and $p(\text{fit} \mid
 #   \text{wrong})$ are calibrated when the run starts on the run's own map and
 #   sensor model, weighed against the places elsewhere that fit as well
-#   (chapter 9 lists its parts). *Localized* from 0.95, *lost* below 0.7: two
-#   documented thresholds on a probability, not a dozen on the evidence.
+#   (chapter 9 lists its parts). *Localized* from 0.95, *lost* below 0.7 (or
+#   when its place part alone no longer allows 0.95: the margin forgives a
+#   dip in the fit, not another place): two documented thresholds on a
+#   probability, not a dozen on the evidence.
 #   `--state thresholds` brings back those dozen (`localize.policies.StateRules`:
 #   cluster share and spread, fit ratios, a probe, scans in a row), chosen on
 #   the five buildings below; the benchmark measures both.
@@ -289,11 +291,11 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # four localized within it (three ACES runs within five scans) but did not
 # stay within the success band. The last column is stricter: two runs (one on
 # ACES, one on Willow) called a wrong place "localized" at some scans, 2 of the
-# 83,577 scans called localized in all (the table below it, scan by scan). The
+# 83,320 scans called localized in all (the table below it, scan by scan). The
 # threshold state's run of the same draw calls more of them localized while
 # more than 1 m off (23), and says "localized" at only 93.9% of the scans
 # within 0.3 m of the truth (after the first localized scan), where the
-# probability says it at 98.6%: the threshold state is lost far more often
+# probability says it at 98.4%: the threshold state is lost far more often
 # while right. The next cell checks these
 # statements against the tables, so that a re-run of the benchmark cannot
 # silently contradict them.
@@ -314,7 +316,7 @@ if section:
     some_scan = {name: int(cells[10]) for name, cells in table_rows(section).items()}
     assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 1, "csail": 0, "willow": 1}, some_scan
     scans_section = table_rows(section, 1)["all"]   # the scan-by-scan table's row "all"
-    assert scans_section[2] == "83577" and scans_section[3].startswith("2 ") and "(98.6%)" in scans_section[5], \
+    assert scans_section[2] == "83320" and scans_section[3].startswith("2 ") and "(98.4%)" in scans_section[5], \
         scans_section
     thresholds = results_section("bench_global_state_thresholds")
     t_rows = {name: cells[2].split()[0] for name, cells in table_rows(thresholds).items()}
@@ -374,11 +376,11 @@ print(held_out or "benchmarks/RESULTS.md has no bench_global_held_out section ye
 # unknown patches of open floor) does not find them: the square covers walls
 # as well as floor, and the scans there fit the map poorly wherever the
 # particles are. The honesty holds on this draw as well: no run ended
-# "localized" more than 1 m off; eight runs (one on Freiburg 079 and on ACES,
-# three each on CSAIL and Willow) called a wrong place "localized" at some
-# scans, 53 of the 82,941 scans called localized (0.06%; the threshold state
-# 29, 0.04%), and 99.1% of the scans within 0.3 m said "localized" (the
-# threshold state 94.0%).
+# "localized" more than 1 m off; four runs (one each on Freiburg 079 and
+# ACES, two on Willow) called a wrong place "localized" at some scans, 23 of
+# the 82,739 scans called localized (0.03%; the threshold state 29, 0.04%),
+# and 99.0% of the scans within 0.3 m said "localized" (the threshold state
+# 94.0%).
 
 # %% tags=["remove-cell"]
 if held_out:
@@ -388,9 +390,9 @@ if held_out:
     assert rates["willow"] == "51/60" and rates["csail"] == rates["freiburg-079"] == "57/60", rates   # 85%, 95%
     assert all(int(cells[9]) == 0 for cells in table_rows(held_out).values())
     some_scan = {name: int(cells[10]) for name, cells in table_rows(held_out).items()}
-    assert some_scan == {"intel": 0, "freiburg-079": 1, "aces": 1, "csail": 3, "willow": 3}, some_scan
+    assert some_scan == {"intel": 0, "freiburg-079": 1, "aces": 1, "csail": 0, "willow": 2}, some_scan
     scans_held_out = table_rows(held_out, 1)["all"]   # the scan-by-scan table's row "all"
-    assert scans_held_out[2] == "82941" and scans_held_out[3].startswith("53 ") and "(99.1%)" in scans_held_out[5], \
+    assert scans_held_out[2] == "82739" and scans_held_out[3].startswith("23 ") and "(99.0%)" in scans_held_out[5], \
         scans_held_out
     t_held_out = results_section("bench_global_held_out_state_thresholds")
     assert table_rows(t_held_out)["willow"][2].startswith("52/60")
@@ -414,7 +416,7 @@ for name, draw in (("bench_state", "standard draw"), ("bench_state_held_out", "h
 
 # %% [markdown]
 # Both states are far less honest there than on the real logs: of the scans
-# the probability calls localized, 7.1% and 2.7% are more than 1 m off (the
+# the probability calls localized, 5.6% and 2.0% are more than 1 m off (the
 # threshold state: 10.0% and 8.3%), most of them in the symmetric hall and
 # the grids of alike rooms. A building of many alike rooms holds more
 # look-alikes than the rival bank keeps, and a new place starts at even odds
@@ -425,10 +427,12 @@ for name, draw in (("bench_state", "standard draw"), ("bench_state_held_out", "h
 # suggest and what did not work, and `bench_global_experiments_stop61` why
 # the two benchmarks ask for opposite corrections (believing each rival's
 # odds only as far as its own scan-by-scan differences support them lowered
-# these shares from 8.4% and 3.1%).
+# these shares from 8.4% and 3.1% to 7.1% and 2.7%, and keeping the margin
+# between the two thresholds for dips in the fit, never for another place,
+# `bench_global_experiments_stop62`, to the shares above).
 
 # %% tags=["remove-cell"]
-for name, wrong in (("bench_state", ("(7.1%)", "(10.0%)")), ("bench_state_held_out", ("(2.7%)", "(8.3%)"))):
+for name, wrong in (("bench_state", ("(5.6%)", "(10.0%)")), ("bench_state_held_out", ("(2.0%)", "(8.3%)"))):
     cells = table_rows(results_section(name)).get("all")
     if cells:
         assert (cells[4].split()[-1], cells[8].split()[-1]) == wrong, (name, cells)
