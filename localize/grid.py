@@ -409,20 +409,6 @@ class OccupancyGrid:
         return out
 
     # --------------------------------------------------------------- sampling
-    @cached_property
-    def _free_cells(self) -> NDArray[np.intp]:
-        """Flat indices of the free cells (:meth:`sample_free` draws from them at every injection)."""
-        k = np.flatnonzero(self.free)
-        k.setflags(write=False)
-        return k
-
-    @cached_property
-    def _floor_cells(self) -> NDArray[np.intp]:
-        """Flat indices of the free cells and the :attr:`holes`."""
-        k = np.flatnonzero(self.free | self.holes)
-        k.setflags(write=False)
-        return k
-
     def sample_free(self, n: int, rng: np.random.Generator, *, holes: bool = False) -> NDArray[np.float64]:
         """Draw ``n`` poses uniformly over the free space, headings uniform in ``[-pi, pi)``.
 
@@ -438,7 +424,7 @@ class OccupancyGrid:
         """
         check_rng(rng)
         n = check_count(n, "n", minimum=0)
-        free = self._floor_cells if holes else self._free_cells
+        free = np.flatnonzero(self.free | self.holes if holes else self.free)
         if free.size == 0:
             raise ValueError("the map has no free cell to sample from")
         k = free[rng.integers(0, free.size, size=n)]
