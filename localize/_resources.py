@@ -29,11 +29,19 @@ Measured (December 2026, numpy 2):
   500-720 bytes per cell on small maps and 60-75 on large ones (300 x 300:
   66 MB, 600 x 600: 195 MB, 2000 x 2000: 363 MB, 3000 x 3000: 676 MB).
 
+Measured again at stop 62 (the same script): the map's cells cost more than
+that, 97-98 bytes each with the likelihood field (2000 x 2000 cells 395 MB,
+4000 x 4000 1555 MB) and up to 92 with the beam model (3000 x 3000: 826 MB),
+and every run now also builds, per cell, the map's holes (unknown patches of
+floor) and the place search's blurred likelihood field; runs with many
+particles stay well below the per-particle constants (the sensor updates
+work in chunks).
 The constants below are those numbers rounded up by about 10%; over those 15
-runs the estimate is 1.11 to 2.80 times the measured peak, never below it; the estimate
-of a run on a 10 000 x 10 000 map with the likelihood field and 300 000
-particles is 8.5 GB (issue 39 measured 8.7 GB for such a run; the old
-constants said 37 GB), and ``tests/test_cli_faults.py`` holds the estimate above a
+runs the estimate is 1.10 to 32 times the measured peak (1.10-1.27 where the
+map's cells or the beam model dominate), never below it; the estimate of a
+run on a 10 000 x 10 000 map with the likelihood field and 300 000 particles
+is 10.2 GB (issue 39 measured 8.7 GB for such a run; the old constants said
+37 GB), and ``tests/test_cli_faults.py`` holds the estimate above a
 measured peak and within a factor 6 of it.
 """
 
@@ -50,7 +58,7 @@ BYTES_PER_PARTICLE = {"likelihood": 56, "beam": 448}
 #: Bytes per particle and beam of one sensor update, by sensor model.
 BYTES_PER_PARTICLE_BEAM = {"likelihood": 29, "beam": 15}
 #: Bytes per map cell of the sensor model's precomputed tables, by sensor model.
-BYTES_PER_CELL = {"likelihood": 88, "beam": 60}
+BYTES_PER_CELL = {"likelihood": 107, "beam": 75}
 #: Bytes of every run whatever its size (measured: 7.7 MB for 1000 particles and 30 beams on a 24 000-cell
 #: map, of which 0.8 MB are the particles' and 2 MB the cells').
 BASE_BYTES = 8 * 1024**2
@@ -66,7 +74,7 @@ def estimate_run_bytes(n_particles: int, n_beams: int, sensor: str = "likelihood
     >>> format_bytes(estimate_run_bytes(10_000, 30))
     '16.8 MB'
     >>> format_bytes(estimate_run_bytes(300_000, 30, n_cells=10_000 * 10_000))   # a 10 000 x 10 000 map
-    '8.5 GB'
+    '10.2 GB'
     >>> format_bytes(estimate_run_bytes(100_000_000, 30, "beam", n_cells=800 * 800))
     '83.9 GB'
     """
@@ -212,7 +220,7 @@ def check_memory(n_particles: int, n_beams: int, sensor: str = "likelihood", ava
     >>> check_memory(1000, 30, n_cells=10**9, available=2 * 1024**3)
     Traceback (most recent call last):
     ...
-    ValueError: --particles 1000 needs about 82.0 GB of memory (30 beams, likelihood sensor), but only 2.0 GB is available: the map's 1000000000 cells alone need 82.0 GB for the sensor model's tables; use a coarser map (a larger resolution) or crop it
+    ValueError: --particles 1000 needs about 99.7 GB of memory (30 beams, likelihood sensor), but only 2.0 GB is available: the map's 1000000000 cells alone need 99.7 GB for the sensor model's tables; use a coarser map (a larger resolution) or crop it
     """
     need = estimate_run_bytes(n_particles, n_beams, sensor, n_cells)
     source = ""

@@ -89,13 +89,15 @@ def test_the_smallest_room_wins_and_is_named(monkeypatch):
 
 
 def test_a_10000_by_10000_map_is_not_refused_when_it_fits():
-    """Issue 39: such a run needs 8.7 GB; the old estimate said 37.3 GB and 'at most about 0 particles'."""
-    need = _resources.check_memory(300_000, 30, n_cells=10_000 * 10_000, available=10 * 1024**3)
-    assert 8.0 * 1024**3 <= need <= 9.0 * 1024**3
+    """Issue 39: such a run needed 8.7 GB then (the old estimate said 37.3 GB and 'at most about 0 particles');
+    measured again at stop 62, a map's cell costs 97-98 bytes (16 million cells: 1.56 GB), about 9.1 GB for
+    10^8 cells, and the estimate rounds that up by about 10%."""
+    need = _resources.check_memory(300_000, 30, n_cells=10_000 * 10_000, available=11 * 1024**3)
+    assert 9.0 * 1024**3 <= need <= 10.5 * 1024**3
 
 
 def test_a_map_too_large_for_any_particle_count_says_so():
-    with pytest.raises(ValueError, match=r"the map's 100000000 cells alone need 8\.\d GB for the sensor model's "
+    with pytest.raises(ValueError, match=r"the map's 100000000 cells alone need 10\.\d GB for the sensor model's "
                                          r"tables; use a coarser map") as e:
         _resources.check_memory(300_000, 30, n_cells=10_000 * 10_000, available=4 * 1024**3)
     assert "at most about 0 particles" not in str(e.value)
