@@ -817,16 +817,16 @@ class ReliabilityState:
         if not np.isfinite(step.p_localized):
             step.p_localized = self.p_localized(step)
         p = step.p_localized
+        elsewhere = self.place_limit < self.localized_at      # the place part alone no longer allows the claim
         cur = prev
         if p >= self.localized_at:
             cur = "localized"
-        elif prev == "localized" and (p < self.lost_below or self.place_limit < self.localized_at
-                                      or step.degenerate or step.off_map):
+        elif prev == "localized" and (p < self.lost_below or elsewhere or step.degenerate or step.off_map):
             cur = "lost"
         ctx.state = cur
         if cur != prev:
             why = f"p_localized {p:.2f}"
-            if cur == "lost" and p >= self.lost_below and self.place_limit < self.localized_at:
+            if cur == "lost" and p >= self.lost_below and elsewhere:
                 why += f"; the place allows at most {self.place_limit:.2f}: another place is probable"
             ctx.events.append((step.k, f"state {prev} -> {cur} ({why})"))
         return cur
