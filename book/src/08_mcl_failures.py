@@ -736,10 +736,6 @@ for seed, (r_s, tr_s) in runs.items():
           + (f" (steps {off[0]}-{off[-1]}, up to {e_s[off].max():.0f} m)" if off.size else "")
           + (f"; the cloud moved to a rival place at step {', '.join(map(str, moved))}" if moved else "")
           + (f"; lost at step {', '.join(map(str, placed))}: another place probable" if placed else ""))
-    late = off[off >= KIDNAP + 5]
-    if late.size:
-        print(f"         after step {KIDNAP + 5}: steps {late[0]}-{late[-1]}, p_localized "
-              f"{tr_s.p_localized[late].min():.2f}-{tr_s.p_localized[late].max():.2f} there")
 ps, rights = np.concatenate(ps), np.concatenate(rights)
 rows = reliability_table(ps, rights, n_bins=5, min_count=1)
 for lo, hi, n_bin, mean_p, share in rows:
@@ -764,8 +760,9 @@ assert 0.7 < np.mean(rights[sure]) < 0.99                           # "sure" is 
 # finds the robot's place as a rival and the scans begin to tell the two
 # apart, the estimate's share falls. With a sure belief and a share of one
 # half, `p_localized` is $\sqrt{0.5} = 0.71$, above the 0.7 at which a
-# localized filter turns lost: the margin alone would keep the claim, and
-# the share alone allows at most 0.71. What the probability still
+# localized filter turns lost: the margin alone would keep the claim. The
+# share alone allows at most 0.71, below 0.95, so the filter turns *lost*
+# and searches. What the probability still
 # gets wrong is named by the state tests of `tests/test_state_scenarios.py`
 # (in a long featureless corridor, four rivals are not the corridor's continuum of
 # look-alikes) and measured on real logs and maps that none of this was
