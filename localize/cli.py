@@ -15,9 +15,17 @@ model, resample. It writes
 * ``DIR/trajectory.csv`` — one row per scan: ``time,x,y,theta`` (the robot
   centre in the map frame, metres and radians; the mean of the heaviest
   cluster of particles), then ``spread`` (the particles' position standard
-  deviation, metres), ``n_eff`` and ``state`` (``searching``, ``localized``
-  or ``lost``, from the filter's own evidence: see
-  :class:`localize.policies.StateRules`); with reference poses in the log also
+  deviation, metres), ``n_eff``, ``state`` (``searching``, ``localized``
+  or ``lost``, from the filter's own evidence), ``p_localized`` (the
+  probability that the estimate is within 1 m of the robot) and ``p_place``
+  (the most ``p_localized`` could be were the scans' fit sure): the state is
+  *localized* from ``p_localized`` 0.95 on, and a localized filter turns
+  *lost* when ``p_localized`` falls below 0.7 or ``p_place`` below 0.95
+  (:class:`localize.reliability.ReliabilityState`; with ``--state
+  thresholds`` the two are empty and the state comes from
+  :class:`localize.policies.StateRules`; with ``--smooth`` they are the
+  pass's whose estimate the row takes, and the state is the combination's,
+  :mod:`localize.smooth`); with reference poses in the log also
   ``ref_x,ref_y,ref_theta,error``; last the pose covariance of the heaviest
   cluster, ``cov_xx,cov_xy,cov_xtheta,cov_yy,cov_ytheta,cov_thetatheta``;
 * ``DIR/report.png`` — the map with the trajectory coloured by state, the
@@ -218,17 +226,20 @@ def pose_covariances(res: RunResult) -> NDArray:
     return out
 
 
+def _per_scan(res: RunResult, name: str) -> NDArray:
+    """The trace's per-scan column ``name``, or NaN at every scan when the run has none."""
+    v = getattr(res.trace, name, None) if res.trace is not None else None
+    return np.full(len(res.times), np.nan) if v is None or len(v) != len(res.times) else np.asarray(v, dtype=float)
+
+
 def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = None,
                      covariances: NDArray | None = None) -> Path:
-    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state,p_localized`` (empty without a map) (+
-    reference and error, the smoother's
-    columns), then the pose covariance ``cov_xx ... cov_thetatheta`` (:data:`COV_COLUMNS`; ``covariances``,
-    default :func:`pose_covariances`)."""
-    cols = ["time", "x", "y", "theta", "spread", "n_eff", "state", "p_localized"]
+    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state,p_localized,p_place`` (the last two empty
+    without ``--state probability``) (+ reference and error, the smoother's columns), then the pose covariance
+    ``cov_xx ... cov_thetatheta`` (:data:`COV_COLUMNS`; ``covariances``, default :func:`pose_covariances`)."""
+    cols = ["time", "x", "y", "theta", "spread", "n_eff", "state", "p_localized", "p_place"]
     state = res.state if res.state is not None else np.full(len(res.times), "")
-    p_loc = getattr(res.trace, "p_localized", None) if res.trace is not None else None
-    if p_loc is None or len(p_loc) != len(res.times):
-        p_loc = np.full(len(res.times), np.nan)
+    p_loc, p_place = (_per_scan(res, name) for name in ("p_localized", "p_place"))
     if reference is not None:
         cols += ["ref_x", "ref_y", "ref_theta", "error"]
         err = np.hypot(*(res.estimates[:, :2] - reference[:, :2]).T)
@@ -241,7 +252,7 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
         w.writerow(cols)
         for k in range(len(res.times)):
             row = [f"{res.times[k]:.6f}", *(f"{v:.6f}" for v in res.estimates[k]), f"{res.spread[k]:.4f}",
-                   f"{res.n_eff[k]:.1f}", str(state[k]), "" if np.isnan(p_loc[k]) else f"{p_loc[k]:.4f}"]
+                   f"{res.n_eff[k]:.1f}", str(state[k]), *("" if np.isnan(v[k]) else f"{v[k]:.4f}" for v in (p_loc, p_place))]
             if reference is not None:
                 row += [*(f"{v:.6f}" for v in reference[k]), f"{err[k]:.4f}"]
             w.writerow(row + [str(v[k]) for v in extra.values()] + [f"{v:.6g}" for v in cov_terms[k]])
@@ -253,9 +264,10 @@ STATE_MEANING = ("p_localized: the probability that the estimate is within 1 m o
                  "the map there (calibrated at start-up on this map and sensor model), the particles' own mass "
                  "near it, and its share against the look-alike places kept as rivals "
                  f"(localize.reliability.ReliabilityState); localized: p_localized reached {LOCALIZED_AT}; "
-                 f"lost: it was localized and p_localized fell below {LOST_BELOW}, or the particles' mass and the "
-                 f"rivals' share alone no longer allowed {LOCALIZED_AT} (another place probable); searching: never "
-                 "localized yet")
+                 f"p_place: the most p_localized could be were the scans' fit sure (the root of the smallest of "
+                 "the particles' mass near the estimate, the probe and the rivals' share); "
+                 f"lost: it was localized and p_localized fell below {LOST_BELOW} or p_place below {LOCALIZED_AT} "
+                 "(another place probable); searching: never localized yet")
 
 
 def summarize(res: RunResult, log, n_particles: int, reference: NDArray | None, settings: dict,
@@ -388,6 +400,9 @@ def headline(summary: dict) -> str:
     >>> headline({"state": {"first_localized_scan": None, "lost_intervals": [], "final_state": "searching",
     ...                     "scans_without_valid_readings": 90, "events": []}, "scans": 90})
     'NOT localized: still searching at the end; 90 of 90 scans had no valid reading'
+    >>> headline({"state": {"first_localized_scan": 3, "lost_intervals": [[50, 59]], "final_state": "lost",
+    ...                     "final_p_localized": 0.81, "final_p_place": 0.8, "events": []}})
+    'localized from scan 3 (p_localized 0.81, p_place 0.80 at the end); lost at scans 50-59; final state: lost'
     """
     st = summary.get("state")
     if not st:
@@ -395,7 +410,9 @@ def headline(summary: dict) -> str:
     k = st["first_localized_scan"]
     parts = [f"localized from scan {k}" if k is not None else "NOT localized: still searching at the end"]
     if st.get("final_p_localized") is not None:
-        parts[0] += f" (p_localized {st['final_p_localized']:.2f} at the end)"
+        place = st.get("final_p_place")
+        place = f", p_place {place:.2f}" if place is not None and place < LOCALIZED_AT else ""   # when it decided
+        parts[0] += f" (p_localized {st['final_p_localized']:.2f}{place} at the end)"
     if st["lost_intervals"]:
         parts.append("lost at scans " + ", ".join(f"{a}-{b}" for a, b in st["lost_intervals"]))
     if k is not None:

@@ -220,6 +220,7 @@ class Step:
     agreed: bool = False
     state: str = "searching"
     p_localized: float = float("nan")
+    p_place: float = float("nan")
     evidence: float = float("nan")
     reset_share: float = 0.0
     proposal: Any = None

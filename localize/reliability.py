@@ -609,7 +609,8 @@ class ReliabilityState:
     ``localized`` again there. A localized filter turns ``lost`` when
     ``p_localized`` falls below ``lost_below`` (or every particle failed), or
     when ``m`` alone no longer allows ``localized_at``: ``sqrt(m)`` (the most
-    ``p_localized`` can be, with a sure ``b``; :attr:`place_limit`) below it.
+    ``p_localized`` can be, with a sure ``b``; :attr:`place_limit`, the
+    ``p_place`` column of ``trajectory.csv``) below it.
     The margin between the two thresholds is for the fit: where the map is
     wrong, a right place's scans fit poorly for a while and ``b`` dips, and a
     state that turned lost at every such dip would cry wolf. A ``m`` below
@@ -756,6 +757,7 @@ class ReliabilityState:
         if self.model is None and step.scan is not None and step.n_valid > 0:
             self._calibrate(np.asarray(step.scan[1], dtype=float))
         if self.belief is None:
+            step.p_place = self.place_limit
             return 0.0
         judged = bool(step.updated and step.n_valid > 0)
         if self.jumped(step):
@@ -773,7 +775,7 @@ class ReliabilityState:
         mass = self.cloud_mass(step)
         share = self.rival_share(step, mass)
         m = min(mass, self.probe_mass, share)
-        self.place_limit = float(np.sqrt(m))
+        self.place_limit = step.p_place = float(np.sqrt(m))
         p = float(np.sqrt(self.belief.p * m))
         if not judged and self.last_p is not None:
             p = min(p, self.last_p)         # no new evidence, no rise (the cloud's mass only wanders by resampling)
@@ -827,6 +829,7 @@ class ReliabilityState:
         if cur != prev:
             why = f"p_localized {p:.2f}"
             if cur == "lost" and p >= self.lost_below and elsewhere:
-                why += f"; the place allows at most {self.place_limit:.2f}: another place is probable"
+                below = np.floor(self.place_limit * 1000) / 1000     # printed below the threshold, as it is
+                why += f"; p_place {below:.3f} below {self.localized_at:g}: another place is probable"
             ctx.events.append((step.k, f"state {prev} -> {cur} ({why})"))
         return cur

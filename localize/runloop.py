@@ -127,6 +127,11 @@ class RunTrace(StateTrack):
         The probability that the estimate is within a metre of the robot
         (:class:`localize.reliability.ReliabilityState`; NaN for a run whose state comes from
         :class:`~localize.policies.ThresholdState`, e.g. without a map).
+    p_place : ndarray (T,), optional
+        The most ``p_localized`` could be with a sure fit belief, the place part's root
+        (:attr:`localize.reliability.ReliabilityState.place_limit`; NaN as ``p_localized``). A
+        localized filter turns lost when it falls below ``localized_at``: with ``p_localized``, the
+        state is a function of the two columns.
     """
 
     means: NDArray[np.float64]
@@ -147,6 +152,7 @@ class RunTrace(StateTrack):
     snapshots: dict = field(default_factory=dict)
     cov: NDArray[np.float64] | None = None
     p_localized: NDArray[np.float64] | None = None
+    p_place: NDArray[np.float64] | None = None
 
 
     def state_summary(self) -> dict:
@@ -172,7 +178,10 @@ class RunTrace(StateTrack):
         p = self.p_localized
         if p is None or len(p) == 0 or not np.all(np.isfinite(p)):
             return {}
-        return {"final_p_localized": round(float(p[-1]), 4), "mean_p_localized": round(float(np.mean(p)), 4)}
+        out = {"final_p_localized": round(float(p[-1]), 4), "mean_p_localized": round(float(np.mean(p)), 4)}
+        if self.p_place is not None and len(self.p_place) == len(p) and np.isfinite(self.p_place[-1]):
+            out["final_p_place"] = round(float(self.p_place[-1]), 4)
+        return out
 
 
 #: The old name of :class:`RunTrace` (what :func:`run_mcl` returned before the run driver was one).
@@ -405,7 +414,7 @@ class Recorder:
         self.rows.append((step.pose, e.mean, e.std, e.spread, e.best_weight, step.n_eff, step.n_particles,
                           st.n_injected, st.p_inject, step.updated, st.resampled, step.degenerate, step.n_valid,
                           step.fit, step.on_map, step.state, e.cov if e.cluster_cov is None else e.cluster_cov,
-                          step.p_localized))
+                          step.p_localized, step.p_place))
         if step.updated:
             self.evaluations += step.n_particles * (int(np.size(step.z[1])) if is_scan(step.z) else 1)
         if step.k in self.keep:
@@ -430,7 +439,7 @@ class Recorder:
                         on_map=arr[14].astype(float), state=np.array(cols[15], dtype="<U9"), events=events,
                         beam_evaluations=int(self.evaluations), seconds=float(seconds), snapshots=self.snapshots,
                         cov=np.array(cols[16], dtype=float).reshape(-1, 3, 3),
-                        p_localized=np.array(cols[17], dtype=float))
+                        p_localized=np.array(cols[17], dtype=float), p_place=np.array(cols[18], dtype=float))
 
 
 def _check_driver_arguments(recovery_injection: float, skip_short_beams: float,

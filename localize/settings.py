@@ -349,8 +349,8 @@ class RunSettings:
         the robot (a Bayes filter over the scans' fit to the map, calibrated at start-up on this map and
         sensor model, weighed against look-alike places that the filter keeps as rivals and moves to when one
         fits 19 times better; localized at 0.95, lost below 0.7; restarts when it stays below 0.7; lost too
-        when the particles' mass and the rivals' share alone no longer allow 0.95), written to
-        trajectory.csv and summary.json; 'thresholds': the fixed rules of localize.policies.StateRules,
+        when the particles' mass and the rivals' share alone no longer allow 0.95: p_place), both written
+        to trajectory.csv and summary.json; 'thresholds': the fixed rules of localize.policies.StateRules,
         chosen on five logs, the default before stop 53 (default {default}; localize.reliability says what
         the probability still gets wrong). Example: --state thresholds""")
     occupied_penalty: float = setting(

@@ -595,6 +595,9 @@ def smoothed_trace(s: Smoothed) -> RunTrace:
     ``degenerate``, ...) is the forward pass's; events are the forward pass's
     (without its state changes), the backward pass's recoveries (marked
     "backward pass:"), and the state changes of the combined trajectory.
+    ``means``, ``n_eff``, ``p_localized`` and ``p_place`` are those of the pass
+    the scan's estimate is taken from (``source``; forward where both agree):
+    the combined state is the combination's rule above, not derived from them.
     """
     fw, bw = s.forward, s.backward
     events = [(k, t) for k, t in fw.events if not t.startswith("state ")]
@@ -609,8 +612,12 @@ def smoothed_trace(s: Smoothed) -> RunTrace:
     pick_b = s.source == "backward" if s.from_backward is None else s.from_backward
     means = np.where(pick_b[:, None], bw.means, fw.means)
     n_eff = np.where(pick_b, bw.n_eff, fw.n_eff)
+    # p_localized and p_place: the pass the row's estimate comes from says how sure it was (the state is the
+    # combination's, not derived from them)
+    probs = {name: np.where(pick_b, getattr(bw, name), getattr(fw, name)) for name in ("p_localized", "p_place")
+             if getattr(fw, name) is not None and getattr(bw, name) is not None}
     return replace(fw, poses=s.poses, means=means, stds=s.stds, spread=s.spread, n_eff=n_eff, state=s.state,
-                   events=events, beam_evaluations=fw.beam_evaluations + bw.beam_evaluations,
+                   **probs, events=events, beam_evaluations=fw.beam_evaluations + bw.beam_evaluations,
                    seconds=fw.seconds + bw.seconds)
 
 
