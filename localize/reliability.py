@@ -69,9 +69,8 @@ Measured against the truth (``benchmarks/why_wrong.py``,
 that barely tell the two places apart (a few nats over tens of scans, either
 way): a bank that held the robot's place and weighed it as fairly as the
 estimate would leave *localized* possible at about a fifth of them (draw 0:
-117 of 537). In the demo's office it is the other way: at all 37 of its wrong
-claims (seeds 0-9, more than 0.5 m off; 43 before the probe had a transition,
-55 before the margin between the
+117 of 537). In the demo's office it is the other way: at all 43 of its wrong
+claims (seeds 0-9, more than 0.5 m off; 55 before the margin between the
 thresholds was kept for the fit, 74 before the bank believed its odds only as
 far as their spread supports them) the robot's true path fits the scans worse
 than the estimate under the filter's own sensor model, and no bank can help
@@ -569,8 +568,7 @@ class ReliabilityState:
     * ``m``: the filter's own mass near its estimate, the smaller of the share
       of the weight within ``right_radius`` of it and the share the scan itself
       gives the estimate against the estimate moved by ``probe_shift`` metres
-      forwards, backwards, left and right under the sensor model
-      (:attr:`probe_mass`, a Bayes filter over the five; a cloud that
+      forwards, backwards, left and right under the sensor model (a cloud that
       resampling alone shrank onto one stretch of a featureless corridor has
       all its weight there, but the scan fits every stretch alike), and, with
       ``rivals`` (default), the estimate's share of the posterior against the
@@ -711,12 +709,7 @@ class ReliabilityState:
         with np.errstate(divide="ignore", invalid="ignore"):
             ll = np.asarray(self.sensor.log_likelihood(compose(step.pose, d), *step.z), dtype=float)
         if ll.shape == (5,) and np.isfinite(ll[0]):
-            # predict: the robot may have slid to another of the five places since the last update, with the
-            # chance ``p_change`` that a right place becomes wrong without a jump (the belief's transition)
-            q = np.exp(self.probe_ll - logsumexp(self.probe_ll))
-            q = (1.0 - self.p_change) * q + self.p_change * (1.0 - q) / 4.0
-            with np.errstate(divide="ignore"):
-                self.probe_ll = np.log(q) + np.where(np.isfinite(ll), ll, -np.inf)
+            self.probe_ll = self.probe_ll + np.where(np.isfinite(ll), ll, -np.inf)
 
     @property
     def probe_mass(self) -> float:
@@ -724,12 +717,7 @@ class ReliabilityState:
 
         A histogram filter over five hypotheses ("the robot is where the estimate says", or a
         ``probe_shift`` ahead, behind, left, right of it) with the sensor model: in a featureless corridor
-        the scans never tell the estimate from the poses ahead and behind, and this stays at a third. Its
-        transition is the belief's: at every update the robot may have slid from the estimate to one of the
-        moved poses (or back), with the chance ``p_change`` that a right place becomes wrong without a jump.
-        So the scans of a long right stretch do not outvote a slide that the newest scans show (an estimate
-        that drifted a metre while the robot turned on the spot): the slid pose needs to win about
-        ``log(4 / p_change)`` nats, not as many as the estimate gathered since the place was chosen.
+        the scans never tell the estimate from the poses ahead and behind, and this stays at a third.
         """
         if self.probe_shift <= 0:
             return 1.0

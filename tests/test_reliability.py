@@ -280,39 +280,6 @@ def test_a_corridor_never_pins_the_estimate():
     assert 0.2 < state.probe_mass < 0.45 and ctx.state == "searching"
 
 
-def test_the_probe_notices_an_estimate_that_slid_within_a_few_scans():
-    """The probe is a Bayes filter over five places (the estimate, and it moved a metre ahead, behind, left,
-    right) with a transition: at every update the robot may have slid to another of them, with the chance
-    ``p_change`` that a right place becomes wrong without a jump. After 100 scans on which the estimate fitted
-    2 nats better than each moved pose, a slide (the pose behind now fits 3 nats better at every scan) takes the
-    probe below a half within three scans; summed as if the offset never changed, it would take 67. And while
-    the estimate keeps fitting best, the transition costs the probe at most ``p_change``."""
-    from types import SimpleNamespace
-
-    from localize.reliability import ReliabilityState
-
-    class Scores:                       # a sensor model that scores the five probe poses as the test says
-        max_range, sigma_hit, ll = 8.0, 0.1, np.zeros(5)
-
-        def log_likelihood(self, poses, ranges, angles):
-            assert poses.shape == (5, 3)
-            return self.ll
-
-    sensor = Scores()
-    state = ReliabilityState(office(), sensor, rivals=False)
-    step = SimpleNamespace(pose=np.array([2.0, 2.0, 0.0]), z=(np.ones(3), np.zeros(3)))
-    sensor.ll = np.array([0.0, -2.0, -2.0, -2.0, -2.0])
-    for _ in range(100):
-        state.probe(step)
-    assert 1.0 - state.p_change < state.probe_mass < 1.0
-    sensor.ll = np.array([0.0, -2.0, 3.0, -2.0, -2.0])      # the pose a metre behind the estimate fits better
-    masses = []
-    for _ in range(3):
-        state.probe(step)
-        masses.append(state.probe_mass)
-    assert masses[0] > 0.5 > masses[2], masses
-
-
 def test_no_evidence_from_inside_a_mapped_obstacle():
     from localize.reliability import ReliabilityState
 
