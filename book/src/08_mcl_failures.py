@@ -762,7 +762,11 @@ assert 0.7 < np.mean(rights[sure]) < 0.99                           # "sure" is 
 # half, `p_localized` is $\sqrt{0.5} = 0.71$, above the 0.7 at which a
 # localized filter turns lost: the margin alone would keep the claim. The
 # share alone allows at most 0.71, below 0.95, so the filter turns *lost*
-# and searches. What the probability still
+# and searches. `localize run` writes both numbers into `trajectory.csv`,
+# scan by scan: `p_localized`, and `p_place`, the most `p_localized` could
+# be with a sure belief (the square root of the smallest of the three
+# masses); the state follows from those two columns and the two
+# thresholds alone. What the probability still
 # gets wrong is named by the state tests of `tests/test_state_scenarios.py`
 # (in a long featureless corridor, four rivals are not the corridor's continuum of
 # look-alikes) and measured on real logs and maps that none of this was
