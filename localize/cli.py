@@ -576,7 +576,7 @@ def build_parser() -> argparse.ArgumentParser:
         usage="localize run --log FILE (--map FILE | --build-map) [--out DIR] [options]",
         description=_wrap("Monte Carlo Localization on a log: particles start over the map's free space (or "
                           "around --initial-pose), move with the odometry and are weighted by the laser scans. "
-                          "Writes DIR/trajectory.csv (pose, state, covariance per scan), DIR/report.png, "
+                          "Writes DIR/trajectory.csv (pose, state, p_localized and p_place, covariance per scan), DIR/report.png, "
                           "DIR/summary.json and DIR/trajectory.tum; all together when the run is complete."),
         epilog=RUN_EXAMPLES + "\nAMCL parameters (--amcl-params FILE.yaml), ROS 1 amcl or nav2 nav2_amcl:\n"
         + _amcl_table() + "\n\nEach setting's rationale: localize.settings.explain(NAME), and chapter 9.",

@@ -529,8 +529,9 @@ assert settings.DEFAULTS["min_motion"] == (0.2, 0.3) and settings.DEFAULTS["skip
 # the estimate is within 1 m of the robot, and writes it to `trajectory.csv`
 # beside the state read from it: *localized* once it reaches 0.95, *lost*
 # when a localized filter falls below 0.7 (or when the second kind of
-# evidence below alone no longer allows 0.95), *searching* before the first
-# time. Two kinds of evidence enter it (their geometric mean):
+# evidence below alone no longer allows 0.95: the column `p_place` holds
+# the most it allows), *searching* before the first time. Two kinds of
+# evidence enter it (their geometric mean):
 #
 # 1. **the scans fit the map at the estimate**: the belief of chapter 8's
 #    two-state filter over the scans' fits, with $p(\text{fit} \mid
