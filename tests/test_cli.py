@@ -402,6 +402,18 @@ def test_state_column_and_summary_section(sim_files, tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert {"first_localized_scan", "lost_intervals", "final_state"} <= set(s["state"])
     assert ("localized from scan" in text) or ("NOT localized" in text)
+    # the probability state's two columns: p_localized = sqrt(b m) never exceeds p_place = sqrt(m)
+    p = np.array([float(r["p_localized"]) for r in rows])
+    place = np.array([float(r["p_place"]) for r in rows])
+    assert np.all((0 <= p) & (p <= place + 1e-4) & (place <= 1)) and p.max() >= 0.95
+    assert s["state"]["final_p_place"] == pytest.approx(place[-1], abs=1e-4)
+    # the threshold state has neither
+    status, _, _ = run_cli("run", "--map", m, "--log", lg, "--particles", "2000", "--state", "thresholds",
+                           "--out", tmp_path / "t")
+    assert status == 0
+    rows = list(csv.DictReader(open(tmp_path / "t" / "trajectory.csv")))
+    assert all(r["p_localized"] == r["p_place"] == "" for r in rows)
+    assert not {"final_p_localized", "final_p_place"} & set(json.loads((tmp_path / "t" / "summary.json").read_text())["state"])
 
 
 def test_particles_auto_is_one_per_kld_bin_of_the_free_space_within_bounds():
