@@ -30,7 +30,8 @@ model, resample. It writes
   cluster, ``cov_xx,cov_xy,cov_xtheta,cov_yy,cov_ytheta,cov_thetatheta``;
 * ``DIR/report.png`` — the map with the trajectory coloured by state, the
   reference (the log's, or ``--reference FILE``), the final particles, and the
-  error (or spread) against time (:func:`localize.plot.report.report_figure`);
+  error (or spread) against time, with ``p_localized`` and ``p_place``
+  (:func:`localize.plot.report.report_figure`);
 * ``DIR/summary.json`` — particles, scans, seconds per scan, real-time factor,
   the ``state`` section (first localized scan, lost intervals, final state,
   events such as rejected odometry records), errors against the reference

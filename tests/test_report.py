@@ -78,6 +78,34 @@ def test_the_picture_has_its_legend_and_both_panels(tracked):
     plt.close(fig)
 
 
+def test_the_probability_state_draws_both_columns_and_its_thresholds(tracked):
+    """With the probability state, the time panel carries ``p_localized`` and ``p_place`` on a second axis (0-1),
+    the very values of the trace, and the two thresholds the state is read from; the threshold state has none."""
+    from localize.reliability import LOCALIZED_AT, LOST_BELOW
+
+    g, r, _ = tracked
+    angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)
+    lf = LikelihoodField(g, 8.0, sigma_hit=0.2, temper=0.1)
+    f = MCL.gaussian(r.poses[0], (0.2, 0.2, 0.1), 2000, OdometryMotion(r.alphas, min_std=0.01), lf,
+                     rng=np.random.default_rng(4), grid=g)
+    tr = run_filter(f, 30, r.control, lambda k: (r.ranges[k], angles), state="probability")
+    fig = report_figure(g, tr, r.poses)
+    assert len(fig.axes) == 3
+    twin = fig.axes[2]
+    curves = {ln.get_label(): np.asarray(ln.get_ydata(), dtype=float) for ln in twin.lines if ln.get_label()[0] != "_"}
+    assert set(curves) == {"p_localized (right axis)", "p_place (right axis)"}
+    assert np.array_equal(curves["p_localized (right axis)"], tr.p_localized)
+    assert np.array_equal(curves["p_place (right axis)"], tr.p_place)
+    levels = sorted(float(ln.get_ydata()[0]) for ln in twin.lines if ln.get_label()[0] == "_")
+    assert levels == [LOST_BELOW, LOCALIZED_AT] and twin.get_ylim() == (0.0, 1.02)
+    legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert "p_localized (right axis)" in legend and "localized" in legend
+    plt.close(fig)
+    fig = report_figure(g, tracked[2], r.poses)              # the threshold state: no probability, no second axis
+    assert len(fig.axes) == 2
+    plt.close(fig)
+
+
 def test_a_reference_of_the_wrong_length_is_refused(tracked):
     g, r, tr = tracked
     with pytest.raises(ValueError, match="one pose per scan"):

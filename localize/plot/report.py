@@ -7,7 +7,9 @@
   particle cloud (when the trace holds a snapshot of the last step), start and
   end marked, and a legend;
 * the error against the reference over the scans (when one is given), or the
-  spread of the best cluster, on a log axis, with the state shaded behind it.
+  spread of the best cluster, on a log axis, with the state shaded behind it;
+  with the probability state, ``p_localized`` and ``p_place`` on a second
+  axis (0-1, right) with the two thresholds the state is read from.
 
 ``localize run`` writes it as ``report.png`` with every run.
 """
@@ -23,6 +25,7 @@ from matplotlib.patches import Patch
 from numpy.typing import ArrayLike
 
 from ..grid import OccupancyGrid
+from ..reliability import LOCALIZED_AT, LOST_BELOW
 from . import draw_map
 
 __all__ = ["report_figure", "STATE_COLORS"]
@@ -54,6 +57,24 @@ def _draw_final_cloud(ax: Any, trace: Any, last: int, max_particles: int) -> Non
     label = f"final particles ({n_all:,})" if shown >= n_all else f"final particles ({shown:,} of {n_all:,})"
     ax.scatter(parts[sub, 0], parts[sub, 1], s=2, color="tab:purple", alpha=0.35, linewidths=0, label=label,
                zorder=2)
+
+
+def _draw_probability(ax2: Any, trace: Any, t: np.ndarray) -> Any:
+    """``p_localized`` and ``p_place`` on a twin axis of ``ax2`` with the state's thresholds; the twin axis (None
+    when the trace has no finite ``p_localized``: the threshold state)."""
+    p = getattr(trace, "p_localized", None)
+    if p is None or len(p) != len(t) or not np.any(np.isfinite(p)):
+        return None
+    ax3 = ax2.twinx()
+    ax3.plot(t, p, color="tab:blue", lw=1.0, label="p_localized (right axis)")
+    place = getattr(trace, "p_place", None)
+    if place is not None and len(place) == len(t) and np.any(np.isfinite(place)):
+        ax3.plot(t, place, color="tab:cyan", lw=0.8, ls="--", label="p_place (right axis)")
+    for level in (LOCALIZED_AT, LOST_BELOW):
+        ax3.axhline(level, color="tab:blue", lw=0.6, ls=":", alpha=0.8)
+    ax3.set_ylim(0.0, 1.02)
+    ax3.set_ylabel(f"probability (dotted: {LOCALIZED_AT:g} localized, {LOST_BELOW:g} lost)")
+    return ax3
 
 
 def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None = None, *,
@@ -136,8 +157,12 @@ def report_figure(grid: OccupancyGrid, trace: Any, reference: ArrayLike | None =
         lo = t[a] - (0.5 if times is None else 0.0)
         hi = t[b] + (0.5 if times is None else 0.0)
         ax2.axvspan(lo, hi, color=STATE_COLORS.get(name, "0.8"), alpha=0.15, lw=0)
-    handles = ax2.get_legend_handles_labels()[0] + [Patch(color=c, alpha=0.3, label=n) for n, c in STATE_COLORS.items()]
-    ax2.legend(handles=handles, loc="upper right", fontsize=8)
+    ax3 = _draw_probability(ax2, trace, t)
+    handles = ax2.get_legend_handles_labels()[0] + ([] if ax3 is None else ax3.get_legend_handles_labels()[0])
+    handles += [Patch(color=c, alpha=0.3, label=n) for n, c in STATE_COLORS.items()]
+    leg2 = ax2.legend(handles=handles, loc="lower right", bbox_to_anchor=(0.99, 0.0), bbox_transform=fig.transFigure,
+                      ncol=3, fontsize=8, frameon=False)    # below the panel, as the map's: off every curve
+    leg2.set_in_layout(False)
     ax2.set_xlabel("time (s)" if times is not None else "scan")
     ax2.grid(True, alpha=0.3, which="both")
     ax2.set_title("error" if ref is not None else "spread", loc="left")
