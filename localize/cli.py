@@ -227,6 +227,18 @@ def pose_covariances(res: RunResult) -> NDArray:
     return out
 
 
+def _probability_text(v: float) -> str:
+    """A probability as ``trajectory.csv`` writes it: four decimals, rounded down, so that the state's thresholds
+    (multiples of 0.0001) compare with the written value as they did with the exact one; empty for NaN.
+
+    Examples
+    --------
+    >>> _probability_text(0.94996), _probability_text(0.95), _probability_text(1.0), _probability_text(float("nan"))
+    ('0.9499', '0.9500', '1.0000', '')
+    """
+    return "" if np.isnan(v) else f"{np.floor(v * 10000.0) / 10000.0:.4f}"
+
+
 def _per_scan(res: RunResult, name: str) -> NDArray:
     """The trace's per-scan column ``name``, or NaN at every scan when the run has none."""
     v = getattr(res.trace, name, None) if res.trace is not None else None
@@ -235,8 +247,9 @@ def _per_scan(res: RunResult, name: str) -> NDArray:
 
 def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = None,
                      covariances: NDArray | None = None) -> Path:
-    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state,p_localized,p_place`` (the last two empty
-    without ``--state probability``) (+ reference and error, the smoother's columns), then the pose covariance
+    """Write ``trajectory.csv``: ``time,x,y,theta,spread,n_eff,state,p_localized,p_place`` (the last two rounded
+    down to four decimals, so that the state follows from them exactly; empty without ``--state probability``)
+    (+ reference and error, the smoother's columns), then the pose covariance
     ``cov_xx ... cov_thetatheta`` (:data:`COV_COLUMNS`; ``covariances``, default :func:`pose_covariances`)."""
     cols = ["time", "x", "y", "theta", "spread", "n_eff", "state", "p_localized", "p_place"]
     state = res.state if res.state is not None else np.full(len(res.times), "")
@@ -253,7 +266,7 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
         w.writerow(cols)
         for k in range(len(res.times)):
             row = [f"{res.times[k]:.6f}", *(f"{v:.6f}" for v in res.estimates[k]), f"{res.spread[k]:.4f}",
-                   f"{res.n_eff[k]:.1f}", str(state[k]), *("" if np.isnan(v[k]) else f"{v[k]:.4f}" for v in (p_loc, p_place))]
+                   f"{res.n_eff[k]:.1f}", str(state[k]), _probability_text(p_loc[k]), _probability_text(p_place[k])]
             if reference is not None:
                 row += [*(f"{v:.6f}" for v in reference[k]), f"{err[k]:.4f}"]
             w.writerow(row + [str(v[k]) for v in extra.values()] + [f"{v:.6g}" for v in cov_terms[k]])
