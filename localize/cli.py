@@ -106,7 +106,7 @@ from .pipeline import (  # noqa: F401
     read_log_file,
     resolve_particles,
 )
-from .reliability import LOCALIZED_AT, LOST_BELOW  # the probability state's thresholds, for summary.json
+from .reliability import LOCALIZED_AT, LOST_BELOW, floor_text  # the probability state: its thresholds, its numbers
 from .settings import RunSettings
 
 __all__ = ["main", "build_parser", "Progress", "run_kwargs", "write_trajectory", "summarize", "write_summary",
@@ -227,18 +227,6 @@ def pose_covariances(res: RunResult) -> NDArray:
     return out
 
 
-def _probability_text(v: float) -> str:
-    """A probability as ``trajectory.csv`` writes it: four decimals, rounded down, so that the state's thresholds
-    (multiples of 0.0001) compare with the written value as they did with the exact one; empty for NaN.
-
-    Examples
-    --------
-    >>> _probability_text(0.94996), _probability_text(0.95), _probability_text(1.0), _probability_text(float("nan"))
-    ('0.9499', '0.9500', '1.0000', '')
-    """
-    return "" if np.isnan(v) else f"{np.floor(v * 10000.0) / 10000.0:.4f}"
-
-
 def _per_scan(res: RunResult, name: str) -> NDArray:
     """The trace's per-scan column ``name``, or NaN at every scan when the run has none."""
     v = getattr(res.trace, name, None) if res.trace is not None else None
@@ -266,7 +254,7 @@ def write_trajectory(path: Path, res: RunResult, reference: NDArray | None = Non
         w.writerow(cols)
         for k in range(len(res.times)):
             row = [f"{res.times[k]:.6f}", *(f"{v:.6f}" for v in res.estimates[k]), f"{res.spread[k]:.4f}",
-                   f"{res.n_eff[k]:.1f}", str(state[k]), _probability_text(p_loc[k]), _probability_text(p_place[k])]
+                   f"{res.n_eff[k]:.1f}", str(state[k]), floor_text(p_loc[k], 4), floor_text(p_place[k], 4)]
             if reference is not None:
                 row += [*(f"{v:.6f}" for v in reference[k]), f"{err[k]:.4f}"]
             w.writerow(row + [str(v[k]) for v in extra.values()] + [f"{v:.6g}" for v in cov_terms[k]])

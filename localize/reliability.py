@@ -116,7 +116,23 @@ from .sensors import sensor_poses
 
 __all__ = ["EvidenceModel", "calibrate", "calibrate_once", "content_key", "calibration_fits", "simulate_scans", "look_alikes", "converged_error", "error_levels",
            "LocalizedBelief",
-           "ReliabilityState", "reliability_table", "LOCALIZED_AT", "LOST_BELOW"]
+           "ReliabilityState", "reliability_table", "floor_text", "LOCALIZED_AT", "LOST_BELOW"]
+
+def floor_text(v: float, decimals: int) -> str:
+    """``v`` written with ``decimals`` decimals, rounded down (empty for NaN): a threshold that is a multiple of
+    ``10**-decimals`` compares with the written value as with ``v`` itself, so a probability just below 0.95
+    never reads "0.95" (the state's events, ``trajectory.csv``).
+
+    Examples
+    --------
+    >>> floor_text(0.94996, 4), floor_text(0.9497, 3), floor_text(0.95, 4), floor_text(float("nan"), 4)
+    ('0.9499', '0.949', '0.9500', '')
+    """
+    if np.isnan(v):
+        return ""
+    scale = 10.0 ** decimals
+    return f"{np.floor(v * scale) / scale:.{decimals}f}"
+
 
 #: Share of the scans at a right estimate whose fit the map gets wrong for reasons no sensor model simulates
 #: (a moved cabinet, a crowd, glass, a door left open): the robust part of ``p(fit | right)``, as ``z_rand``
@@ -829,7 +845,6 @@ class ReliabilityState:
         if cur != prev:
             why = f"p_localized {p:.2f}"
             if cur == "lost" and p >= self.lost_below and elsewhere:
-                below = np.floor(self.place_limit * 1000) / 1000     # printed below the threshold, as it is
-                why += f"; p_place {below:.3f} below {self.localized_at:g}: another place is probable"
+                why += f"; p_place {floor_text(self.place_limit, 3)} below {self.localized_at:g}: another place is probable"
             ctx.events.append((step.k, f"state {prev} -> {cur} ({why})"))
         return cur
