@@ -34,6 +34,7 @@ model, resample. It writes
   (:func:`localize.plot.report.report_figure`);
 * ``DIR/summary.json`` — particles, scans, seconds per scan, real-time factor,
   the ``state`` section (first localized scan, lost intervals, final state,
+  ``final_p_localized`` and ``final_p_place`` as the CSV's last row writes them,
   events such as rejected odometry records), errors against the reference
   while localized, the final pose with its covariance, the map check
   (:func:`localize.pipeline.check_map`), and the settings used;
@@ -405,6 +406,9 @@ def headline(summary: dict) -> str:
     >>> headline({"state": {"first_localized_scan": 3, "lost_intervals": [[50, 59]], "final_state": "lost",
     ...                     "final_p_localized": 0.81, "final_p_place": 0.8, "events": []}})
     'localized from scan 3 (p_localized 0.81, p_place 0.80 at the end); lost at scans 50-59; final state: lost'
+    >>> headline({"state": {"first_localized_scan": 3, "lost_intervals": [], "final_state": "lost",
+    ...                     "final_p_localized": 0.9, "final_p_place": 0.9499, "events": []}})
+    'localized from scan 3 (p_localized 0.90, p_place 0.94 at the end); final state: lost'
     """
     st = summary.get("state")
     if not st:
@@ -413,8 +417,9 @@ def headline(summary: dict) -> str:
     parts = [f"localized from scan {k}" if k is not None else "NOT localized: still searching at the end"]
     if st.get("final_p_localized") is not None:
         place = st.get("final_p_place")
-        place = f", p_place {place:.2f}" if place is not None and place < LOCALIZED_AT else ""   # when it decided
-        parts[0] += f" (p_localized {st['final_p_localized']:.2f}{place} at the end)"
+        # rounded down, so that a value just below a threshold never reads as the threshold
+        place = f", p_place {floor_text(place, 2)}" if place is not None and place < LOCALIZED_AT else ""   # it decided
+        parts[0] += f" (p_localized {floor_text(st['final_p_localized'], 2)}{place} at the end)"
     if st["lost_intervals"]:
         parts.append("lost at scans " + ", ".join(f"{a}-{b}" for a, b in st["lost_intervals"]))
     if k is not None:

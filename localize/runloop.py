@@ -43,7 +43,7 @@ from .policies import (
     ThresholdState,
     is_scan,
 )
-from .reliability import ReliabilityState
+from .reliability import ReliabilityState, floor_text
 
 __all__ = ["run", "Policies", "Recorder", "RunTrace", "StateTrack", "MCLTrace", "run_filter", "run_mcl",
            "default_policies"]
@@ -178,9 +178,10 @@ class RunTrace(StateTrack):
         p = self.p_localized
         if p is None or len(p) == 0 or not np.all(np.isfinite(p)):
             return {}
-        out = {"final_p_localized": round(float(p[-1]), 4), "mean_p_localized": round(float(np.mean(p)), 4)}
+        # the final values rounded down, as trajectory.csv writes them: they compare with the thresholds as the run's
+        out = {"final_p_localized": float(floor_text(p[-1], 4)), "mean_p_localized": round(float(np.mean(p)), 4)}
         if self.p_place is not None and len(self.p_place) == len(p) and np.isfinite(self.p_place[-1]):
-            out["final_p_place"] = round(float(self.p_place[-1]), 4)
+            out["final_p_place"] = float(floor_text(self.p_place[-1], 4))
         return out
 
 
