@@ -99,6 +99,7 @@ from __future__ import annotations
 import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
+from decimal import ROUND_FLOOR, Decimal
 from typing import Any
 
 import numpy as np
@@ -127,11 +128,18 @@ def floor_text(v: float, decimals: int) -> str:
     --------
     >>> floor_text(0.94996, 4), floor_text(0.9497, 3), floor_text(0.95, 4), floor_text(float("nan"), 4)
     ('0.9499', '0.949', '0.9500', '')
+
+    A value that already has no more decimals is written as it is (``0.57 * 100`` is 56.99999999999999 in floating
+    point, and ``floor`` of it would write 0.56): the rounding is done on the value's shortest decimal form.
+
+    >>> floor_text(0.57, 2), floor_text(0.0003, 4), floor_text(1e-05, 4), floor_text(1.0, 2)
+    ('0.57', '0.0003', '0.0000', '1.00')
     """
-    if np.isnan(v):
-        return ""
-    scale = 10.0 ** decimals
-    return f"{np.floor(v * scale) / scale:.{decimals}f}"
+    v = float(v)
+    if not np.isfinite(v):
+        return "" if np.isnan(v) else f"{v:.{decimals}f}"
+    # repr is the shortest decimal that reads back as v, and reading is monotone: v < 0.95 exactly when it is
+    return str(Decimal(repr(v)).quantize(Decimal(1).scaleb(-decimals), rounding=ROUND_FLOOR))
 
 
 #: Share of the scans at a right estimate whose fit the map gets wrong for reasons no sensor model simulates

@@ -363,3 +363,21 @@ def test_calibrate_once_keys_on_content_and_never_on_a_function(monkeypatch):
     reliability.calibrate_once(office(), odd, angles, 0, n_poses=40)
     reliability.calibrate_once(office(), odd, angles, 0, n_poses=40)
     assert len(calls) == 8                                           # never cached
+
+
+def test_floor_text_writes_a_probability_rounded_down_and_never_below_its_own_decimals():
+    """The CSV's and the summary's probabilities: rounded down (a value just below a threshold never reads as the
+    threshold), and a value that already has that many decimals is written as it is (the headline writes the
+    summary's four-decimal values again with two: 0.57 must not read 0.56)."""
+    from localize.reliability import LOCALIZED_AT, LOST_BELOW, floor_text
+
+    for decimals in (2, 3, 4):
+        exact = np.round(np.arange(0, 10 ** decimals + 1) / 10 ** decimals, decimals)
+        assert [floor_text(v, decimals) for v in exact] == [f"{v:.{decimals}f}" for v in exact]
+    x = np.random.default_rng(0).random(20000)
+    for decimals in (2, 4):
+        written = np.array([float(floor_text(v, decimals)) for v in x])
+        assert np.all(written <= x) and np.all(x - written < 10.0 ** -decimals)
+    for t in (LOCALIZED_AT, LOST_BELOW):
+        below = np.nextafter(t, 0.0)
+        assert float(floor_text(below, 2)) < t and float(floor_text(below, 4)) < t and float(floor_text(t, 2)) == t
