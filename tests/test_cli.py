@@ -410,8 +410,8 @@ def test_state_column_and_summary_section(sim_files, tmp_path):
     # summary.json's final values are the last row's, exactly (both rounded down to four decimals), and the
     # terminal's headline rounds that down again: it never reads 0.95 for a value below it
     assert (s["state"]["final_p_localized"], s["state"]["final_p_place"]) == (p[-1], place[-1])
-    assert f"p_localized {np.floor(p[-1] * 100) / 100:.2f} at the end" in text or \
-        f"p_localized {np.floor(p[-1] * 100) / 100:.2f}, p_place" in text
+    two = rows[-1]["p_localized"][:4]          # "0.9999" -> "0.99": the written value cut, not floor(v * 100)
+    assert f"p_localized {two} at the end" in text or f"p_localized {two}, p_place" in text
     # the threshold state has neither
     status, _, _ = run_cli("run", "--map", m, "--log", lg, "--particles", "2000", "--state", "thresholds",
                            "--out", tmp_path / "t")
