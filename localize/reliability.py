@@ -54,27 +54,27 @@ the command line's default until stop 53, does no better on any of these
 chosen on (``benchmarks/bench_state.py``: generated grids of alike rooms,
 halls of boxes, the office and the symmetric hall, each seen by four kinds
 of laser), the probability errs the other way from the real logs: it is
-over-confident. Of the scans it calls localized, 5.6% and 2.0% (two draws, stop
-62) are more than 1 m off (the threshold state: 10.0% and 8.3%), most of them in
-the symmetric hall and the grids of alike rooms, and at ``p_localized`` 0.7-0.9
-the estimate is right 0.26-0.38 less often than it says. The cause is mostly the bank's, not the
-calibration's (``bench_global_experiments_stop55``): it scores the estimate,
-which the filter keeps where the scans fit best, against rivals that follow
-it rigidly and are re-placed only every few scans, so a rival on the robot's
-place but a few centimetres off it loses nats at most scans
-(``tests/test_rivals.py``, a strict xfail), and it counts two poses less than
-a metre apart as one place whatever their headings.
+over-confident. Of the scans it calls localized, 3.4% and 1.9% (two draws, stop
+65; 5.6% and 2.0% at stop 62) are more than 1 m off (the threshold state: 10.0% and 8.3%), most of them in
+the symmetric hall and the grids of alike rooms. Until stop 64 the cause was mostly the bank's
+(``bench_global_experiments_stop55`` to ``_stop64``): it scored the estimate,
+which the filter keeps where the scans fit best, against rivals that followed
+it rigidly, so a rival on the robot's place but a few centimetres off it lost
+nats at most scans; since stop 65 every place, the estimate's too, is tracked
+by a particle filter of its own (:mod:`localize.rivals`). The bank still counts
+two poses less than a metre apart as one place whatever their headings.
 Measured against the truth (``benchmarks/why_wrong.py``,
 ``bench_global_experiments_stop57``), most of those wrong claims rest on scans
 that barely tell the two places apart (a few nats over tens of scans, either
 way): a bank that held the robot's place and weighed it as fairly as the
 estimate would leave *localized* possible at about a fifth of them (draw 0:
-117 of 537). In the demo's office it is the other way: at all 43 of its wrong
-claims (seeds 0-9, more than 0.5 m off; 55 before the margin between the
-thresholds was kept for the fit, 74 before the bank believed its odds only as
-far as their spread supports them) the robot's true path fits the scans worse
-than the estimate under the filter's own sensor model, and no bank can help
-there.
+117 of 537). In the demo's office (seeds 0-9, localized more than 0.5 m off)
+the wrong claims fell from 74 to 55 when the bank believed its odds only as
+far as their spread supports them, to 43 when the margin between the
+thresholds was kept for the fit, and to 6 when the places were tracked (stop
+65). At three of those six (seed 8, scans 10-12) the robot's true pose fits
+the scans worse than the estimate under the filter's own sensor model (stop
+64), and no bank can help there.
 
 This follows the reliability estimation of Akai et al. (*Reliable Monte Carlo
 localization for mobile robots*, 2023; als_ros), where a classifier's output
@@ -676,11 +676,14 @@ class ReliabilityState:
         Metres within which a reading agrees with the map (default: twice the sensor's ``sigma_hit``).
     rivals : bool
         Keep a :class:`localize.rivals.RivalBank` (default); False leaves it out (the share is then 1).
+    motion : callable, optional
+        The filter's odometry motion model, which the bank's places move by (default: the bank's).
     """
 
     def __init__(self, grid: OccupancyGrid, sensor: Any, *, right_radius: float = 1.0, p_change: float = 0.01,
                  localized_at: float = LOCALIZED_AT, lost_below: float = LOST_BELOW, probe_shift: float = 1.0, seed: int = 0,
-                 model: EvidenceModel | None = None, fit_distance: float | None = None, rivals: bool = True) -> None:
+                 model: EvidenceModel | None = None, fit_distance: float | None = None, rivals: bool = True,
+                 motion: Any = None) -> None:
         if not 0.0 <= lost_below <= localized_at <= 1.0:
             raise ValueError(f"need 0 <= lost_below <= localized_at <= 1; got {lost_below!r}, {localized_at!r}")
         self.grid, self.sensor = grid, sensor
@@ -697,7 +700,7 @@ class ReliabilityState:
         self.offset = np.asarray(getattr(sensor, "sensor_offset", np.zeros(3)), dtype=float)
         self.fit_d = 2.0 * float(getattr(sensor, "sigma_hit", 0.2)) if fit_distance is None else float(fit_distance)
         self.rivals = RivalBank(grid, sensor, radius=self.radius, switch_odds=localized_at / (1.0 - localized_at),
-                                seed=self.seed) if rivals and localized_at < 1.0 else None
+                                seed=self.seed, motion=motion) if rivals and localized_at < 1.0 else None
         self.pending: int | None = None                # a rival that won at this step
         self.place_limit = 1.0                         # sqrt(m) at the last step: p_localized with a sure belief
 
@@ -814,7 +817,8 @@ class ReliabilityState:
         if not (step.updated and step.n_valid > 0 and isinstance(step.z, tuple) and len(step.z) == 2
                 and mass > 0.5 and not (step.degenerate or step.off_map)):
             return self.rivals.share
-        share = self.rivals.observe(step.pose, step.z)     # of this step's estimate, before any move
+        odom = None if step.u is None or step.pair is None else step.pair[1]    # an admitted odometry reading
+        share = self.rivals.observe(step.pose, step.z, odom)
         i = self.rivals.winner()
         # a rival won while the scans still fit the estimate as a right place's do (the belief, and this scan
         # alone, say right more probably than wrong): two places that both fit, the look-alike problem. When the

@@ -6,20 +6,36 @@ stretch looks the same, a place that fits well enough while the robot's place
 fits better. Once the particle filter has settled on one of them, resampling
 has removed the others: the cloud no longer knows they exist.
 
-:class:`RivalBank` keeps them. A rival is the estimate's own trajectory moved
-rigidly: a transform ``G`` of the map such that the robot would be at
-``G ∘ x_t`` if the estimate ``x_t`` is in the wrong place (a room's mirror
-image is the half turn about its centre). The scans the filter uses are scored
-at the estimate and at every rival with the filter's sensor model, and each
-rival keeps the log-odds it has gathered against the estimate since it was
-found,
+:class:`RivalBank` keeps them. Every hypothesis, the estimate's place and
+each rival, is a small particle filter of its own (``particles`` particles,
+chapter 6), moved by the robot's odometry through the filter's own motion
+model (chapter 4) and weighed on the scans the filter uses with the filter's
+sensor model (chapter 5). A rival is the place where the robot would be if
+the estimate is in the wrong place (a room's mirror image is the half turn
+about its centre); ``G`` relates its particles' mean to the filter's estimate,
+the robot at ``G ∘ x_t``. Each hypothesis scores a scan by the mean likelihood
+of its particles, a particle filter's estimate of ``p(z_t | z_1..t-1)`` under
+that hypothesis (its marginal likelihood), and each rival keeps the log-odds
+it has gathered against the estimate's place since it was found,
 
-.. math:: L_i \\leftarrow L_i + \\ell_t(G_i \\circ x_t) - \\ell_t(x_t),
+.. math:: L_i \\leftarrow L_i + \\log \\hat p(z_t \\mid \\text{rival } i) - \\log \\hat p(z_t \\mid \\text{estimate}),
 
-the histogram filter of chapter 2 over a handful of hypotheses, with the
-log-likelihoods ``l`` of chapter 6. The estimate's share of the posterior,
-``1 / (1 + sum_i exp(s_i L_i))`` (even prior odds), is a third estimate of
-"am I localized?": a rival that fits as well holds it at a half.
+the histogram filter of chapter 2 over a handful of hypotheses. The estimate's
+share of the posterior, ``1 / (1 + sum_i exp(s_i L_i))`` (even prior odds), is
+a third estimate of "am I localized?": a rival that fits as well holds it at
+a half.
+
+Why a particle filter per hypothesis and not a pose: a place is never scored
+exactly where the robot is. Stop 64 found the bank's rivals moved rigidly with
+the estimate, each scored at its best of a few small moves, paid for every
+offset between the two alone (a rival found 0.04 m from the robot slid off it
+while the estimate converged elsewhere and lost 56 nats in four scans), and a
+rival moved to its best move at every scan followed the scan's noise instead.
+Tracked alike, every place follows its own scans with the same model of motion
+and noise, and no place is favoured by how it is followed: the estimate's
+place is the bank's own particles too, not the filter's estimate (the filter
+only tells the bank where the estimate is, to keep the rivals at least
+``radius`` from it and to move the cloud when a rival wins).
 
 The sensor model counts its beams as independent readings of an exact map;
 they are neither, and its log-likelihood ratios are too sure of themselves
@@ -30,21 +46,20 @@ as its own per-scan differences support them: ``s_i`` is
 at most 1, from the identity that the variance of an exact Gaussian
 log-likelihood ratio is twice its mean (:attr:`RivalBank.believed`). A place
 that loses a few nats at every scan is believed in full; one whose
-differences swing by more than their mean is believed less. The move to a
-rival (below) is decided on the odds as they are: believed odds would move
-the cloud later, and on ``localize demo``'s office they kept a wrong cloud
-for longer (``benchmarks/RESULTS.md``, ``bench_global_experiments_stop61``). Rivals are
+differences swing by more than their mean is believed less, and the move to
+a rival (below) is decided on the same believed odds: two places that no scan
+tells apart gather differences of either sign, and their raw sum, a random
+walk, would reach any odds in the end. Rivals are
 found every ``every`` scans by a search over the whole map for the places where
 the newest scan fits best (:func:`localize.placesearch.best_places`), ranked
 again on the last ``window`` scans; a new rival starts with the log-odds of
 every scan since the place was chosen (up to ``history``), taken along the
 estimate's trajectory, so that a place that fits the last few scans does not
-outweigh one that has fitted many. Every rival is hill-climbed on the window
-when the search runs (the map is never exactly symmetric), and at every scan
-the estimate and each rival are scored at their best of a few small moves
-(:data:`TRACK_MOVES`), alike.
+outweigh one that has fitted many, and with a copy of the estimate's particles
+about its place. Every rival is hill-climbed on the window when the search
+runs, the estimate's place alike.
 
-When a rival's odds reach those the state calls *localized*
+When a rival's believed odds reach those the state calls *localized*
 (``LOCALIZED_AT``, 19 to 1 against the estimate) over at least a window of
 scans, the filter was on the wrong place:
 :meth:`localize.reliability.ReliabilityState.take_switch` moves the cloud there
@@ -53,29 +68,15 @@ old place as a rival, with the odds it lost by), so that the decision can be
 reversed by later scans. A restart that lands on the same look-alike again
 would not.
 
-**Limits, measured** (``benchmarks/RESULTS.md``, ``bench_global_experiments_stop55``). The estimate is where the
-particle filter put it, at the best fit of its scans; a rival follows it rigidly and is re-placed on its scans only
-at the searches. A rival on the robot's place but a few centimetres off it loses nats at most scans: in a hall
-that no scan can tell from its mirror image, a rival 10 cm and 3 degrees off the mirror image ends 8.8 nats down
-after 40 scans and the bank is sure of the estimate (``tests/test_rivals.py``, a strict xfail), and in a generated
-grid of alike rooms the state said localized a room away for 67 scans while a rival 0.01-0.20 m from the robot
-stayed 4-27 nats down. A rival is also at least ``radius`` from the estimate in position, whatever the headings:
-the robot's place is dropped when the estimate's mirror-image trajectory crosses it facing the other way. Scoring
-every hypothesis by the scan's likelihood averaged over the same neighbourhood and moving each to its best pose
-there (branch ``exp-bank-marginal``) passes that test and lowers the wrong claims on four of five draws of
-``benchmarks/bench_state.py``, but on the four draws it was not found on it loses 9 runs and wins 1, 7 of the 9 in
-the symmetric hall; it is not merged.
-Weighing every rival again at each search, the estimate and the rivals climbed on up to 30 of the scans since the
-place was chosen and each rival's log-odds summed over all of them where it now is (branch ``exp-rescore``), also
-passes that test and lowers the wrong claims on four of five draws of ``bench_state.py`` (5.0% to 3.2% of the
-localized scans), but fewer of the right scans say localized on four (95.1-99.2% against 97.6-99.4%). On
-``bench_global.py``'s held-out draw it keeps every success and 55 wrong scans against 64; on the standard draw one
-Willow run says localized more than 1 m off at 74 scans: the bank moved a right estimate to a place 45 m away, a
-rival climbed onto the scans since a restart and then weighed on those same scans (``_stop58``). Keeping both sums
-for every rival, the estimate's share from the one weighed again and a switch only when both give the odds (branch
-``rescore-switch``), keeps every success of both draws (293 and 288 against 292 and 287), lowers the wrong scans
-(11 and 55 against 14 and 64; 3.7% of the localized scans of ``bench_state.py`` against 5.0%), but fewer of the
-right scans say localized there (97.7% against 98.5%), and a run takes about 1.5 times as long: not merged yet.
+**Limits, measured** (``benchmarks/RESULTS.md``, ``bench_global_experiments_stop65``). A rival placed by hand
+10 cm and 0.05 rad off its place loses nats in the first scans, while its particles reach the place, and the
+bank is then sure of a hall that no scan can tell from its mirror image (``tests/test_rivals.py``, a strict xfail):
+a place's particles start where it was found, with no spread of their own beyond the estimate's. The search's
+climb moves the rivals it finds in steps down to 3 cm before they start. Sixteen particles per place lost the robot
+where the filter's thousands did not (the estimate's place drifted 0.4 m and a mirror image won); the default is
+three times that. In a world that a half turn maps onto itself, the mirror image holds the share near a half
+for as long as no scan tells the two apart, and the state says so: ``localize demo``'s seed 7 ends lost 0.12 m
+from the robot. Earlier designs and what they measured: ``bench_global_experiments_stop55`` to ``_stop64``.
 
 This is multi-hypothesis tracking in the spirit of Jensfelt and Kristensen's
 (*Active global localization for a mobile robot using multiple hypothesis
@@ -94,18 +95,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._checks import check_count, check_positive
-from .geometry import compose, inverse, relative
+from .geometry import compose, inverse, mean_pose, relative
 from .grid import OccupancyGrid
+from .motion import OdometryMotion
 from .placesearch import best_places, climb_on, coarse_model, distinct, scores, stencil
-from .resample import logsumexp
+from .resample import logsumexp, systematic
 
 __all__ = ["RivalBank", "evidence_scale"]
-
-
-#: The small moves each hypothesis may take at every scan (itself, and 10 cm / 0.03 rad then half that, along each
-#: axis), the estimate and the rivals alike: a rival follows where its scans fit (the map is never exactly
-#: symmetric), and the estimate gets the same benefit, so neither is favoured by it.
-TRACK_MOVES = np.vstack([np.zeros(3), stencil(0.1, 0.03, 2)])
 
 
 #: Places the search finds per rival kept: the newest scan alone ranks many look-alikes alike (every corner of
@@ -181,7 +177,13 @@ class RivalBank:
     switch_odds : float
         A rival this much more probable than the estimate takes its place (:meth:`switch`).
     seed : int
-        Seed of the search's own generator (the filter's random stream is not touched).
+        Seed of the bank's own generator, for the search and the particles (the filter's random stream is not
+        touched).
+    motion : callable, optional
+        The filter's motion model, ``motion(poses, (prev_odom, odom), rng)`` (an
+        :class:`~localize.motion.OdometryMotion`); default: ``OdometryMotion()``.
+    particles : int
+        Particles per place, the estimate's and each rival's.
 
     Examples
     --------
@@ -198,12 +200,13 @@ class RivalBank:
     >>> z = (RayCaster(grid, 8.0).cast(x[None], angles)[0], angles)
     >>> share = bank.observe(x, z)
     >>> mirror = bank.places(x)[np.argmax(bank.L)]
-    >>> bool(np.hypot(*(mirror[:2] - [10.0, 1.5])) < 0.2), 0.3 < share < 0.7    # the half turn about (6, 3)
+    >>> bool(np.hypot(*(mirror[:2] - [10.0, 1.5])) < 0.2), 0.25 < share < 0.75  # the half turn about (6, 3)
     (True, True)
     """
 
     def __init__(self, grid: OccupancyGrid, sensor: Any, *, radius: float = 1.0, n_rivals: int = 4, every: int = 5,
-                 window: int = 10, history: int = 200, switch_odds: float = 19.0, seed: int = 0) -> None:
+                 window: int = 10, history: int = 200, switch_odds: float = 19.0, seed: int = 0,
+                 motion: Any = None, particles: int = 48) -> None:
         self.grid, self.sensor = grid, sensor
         self.radius = check_positive(radius, "radius", "metres")
         self.n_rivals, self.every, self.window, self.history = (
@@ -217,6 +220,11 @@ class RivalBank:
         self.L = np.empty(0)                               # each rival's log-odds against the estimate
         self.D = np.empty((0, 0))                          # each rival's per-scan differences, one column per scan
         self.used = 0
+        self.motion = OdometryMotion() if motion is None else motion
+        self.k = check_count(particles, "particles")
+        self.O = np.zeros((1, self.k, 3))                  # each hypothesis's particles (the estimate's first), as
+        self.prev: NDArray | None = None                   # offsets from its place; the estimate at the last scan
+        self.prev_odom: NDArray | None = None              # the odometry reading at the last scan
 
     def hold(self, G: ArrayLike, L: ArrayLike, D: ArrayLike | None = None) -> None:
         """Hold the rivals ``G`` (``(R, 3)``) with log-odds ``L`` (``(R,)``) against the estimate, and their
@@ -228,6 +236,7 @@ class RivalBank:
             raise ValueError(f"need G (R, 3), L (R,) and D (R, {len(self.scans)}: one column per scan kept); got "
                              f"{G.shape}, {L.shape} and {D.shape}")
         self.G, self.L, self.D = G, L, D
+        self.O = np.concatenate([self.O[:1], np.repeat(self.O[:1], len(G), axis=0)])
 
     @property
     def believed(self) -> NDArray[np.float64]:
@@ -244,25 +253,22 @@ class RivalBank:
         """Where each rival puts the robot when the estimate is ``pose``: ``(R, 3)``."""
         return compose(self.G, np.asarray(pose, dtype=float)[None])
 
-    def observe(self, pose: ArrayLike, z: tuple) -> float:
-        """Score the scan ``z`` the filter used at ``pose`` (the estimate) and at each rival; search when due.
+    def observe(self, pose: ArrayLike, z: tuple, odom: ArrayLike | None = None) -> float:
+        """Score the scan ``z`` the filter used at the estimate's place and at each rival; search when due.
 
-        Returns the estimate's :attr:`share`.
+        ``pose`` is the filter's estimate, ``odom`` the odometry reading at this scan (the places' particles move
+        by the odometry since the last scan the bank saw; without one, by the estimate's own step). Returns the
+        estimate's :attr:`share`.
         """
         pose = np.asarray(pose, dtype=float)
         if len(self.scans) == self.scans.maxlen:            # the oldest scan is forgotten, and its differences
             self.D = self.D[:, 1:]
         self.scans.append((pose, z))
         d = np.full(len(self.G), np.nan)
-        if len(self.G):
-            hyps = np.vstack([pose[None], self.places(pose)])
-            cand = compose(hyps[:, None, :], TRACK_MOVES[None, :, :])             # (1 + R, M, 3)
-            ll = scores(self.sensor, cand.reshape(-1, 3), z).reshape(len(hyps), len(TRACK_MOVES))
-            best = np.argmax(ll, axis=1)
-            ll = ll[np.arange(len(hyps)), best]
-            if np.isfinite(ll[0]):
-                d = ll[1:] - ll[0]
-                self.L = self.L + d
+        m = self._track(pose, z, None if odom is None else np.asarray(odom, dtype=float))
+        if len(self.G) and np.isfinite(m[0]):
+            d = m[1:] - m[0]
+            self.L = self.L + d
         self.D = np.column_stack([self.D, d])
         self._keep(np.isfinite(self.L))                     # a rival that left the map, or ran into a wall
         self.used += 1
@@ -270,8 +276,37 @@ class RivalBank:
             self.search(pose)
         return self.share
 
+    def _track(self, pose: NDArray, z: tuple, odom: NDArray | None = None) -> NDArray[np.float64]:
+        """Move every place's particles with the motion model (by the odometry since the last scan, or by the
+        estimate's step without it), weigh them on the scan and resample; return each place's mean likelihood of
+        the scan (log), the estimate's first."""
+        G = np.vstack([np.zeros((1, 3)), self.G])
+        prev = pose if self.prev is None else self.prev
+        before = compose(compose(G, prev[None])[:, None, :], self.O).reshape(-1, 3)
+        if self.prev is None:
+            moved = before
+        elif odom is not None and self.prev_odom is not None:
+            moved = self.motion(before, (self.prev_odom, odom), self.rng)    # the odometry, as the filter moves
+        else:
+            moved = self.motion(before, (prev, pose), self.rng)
+        self.prev_odom = odom
+        ll = scores(self.sensor, moved, z).reshape(len(G), self.k)
+        m = np.array([logsumexp(row) for row in ll]) - np.log(self.k)
+        moved = moved.reshape(len(G), self.k, 3)
+        for h in range(len(G)):
+            if np.isfinite(m[h]):
+                moved[h] = moved[h, systematic(np.exp(ll[h] - np.max(ll[h])), self.rng)]
+        places = compose(G, pose[None])
+        centre = np.array([mean_pose(q) for q in moved])                     # the rivals' places follow their
+        centre[0] = places[0]                                                # particles; the estimate's is its own
+        self.G = compose(centre[1:], inverse(pose)[None])
+        self.O = compose(inverse(centre)[:, None, :], moved)
+        self.prev = pose
+        return m
+
     def _keep(self, mask: NDArray[np.bool_]) -> None:
         self.G, self.L, self.D = self.G[mask], self.L[mask], self.D[mask]
+        self.O = self.O[np.concatenate([[True], mask])]
 
     def _scan_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None) -> NDArray[np.float64]:
         """Log-likelihood ``(H, S)`` of each of the window's scans (or ``scans``) for hypotheses ``(H, 3)`` (poses
@@ -326,7 +361,9 @@ class RivalBank:
         G = compose(hyps, inverse(pose)[None])
         order = [i for i in np.argsort(-L) if ok[i]]
         kept = distinct(hyps, order, self.n_rivals, self.radius, heading=np.inf)   # distinct places, the best first
+        O = np.concatenate([self.O[1:], np.repeat(self.O[:1], len(hyps) - n_old, axis=0)])
         self.G, self.L, self.D = G[kept], L[kept], D[kept]
+        self.O = np.concatenate([self.O[:1], O[kept]])
 
     def winner(self) -> int | None:
         """The rival that should take the estimate's place (odds of ``switch_odds`` or more, over at least a
@@ -334,8 +371,9 @@ class RivalBank:
         always), or None."""
         if len(self.L) == 0 or len(self.scans) < self.window:
             return None
-        i = int(np.argmax(self.L))
-        return i if self.L[i] >= self.switch_log_odds else None
+        b = self.believed
+        i = int(np.argmax(b))
+        return i if b[i] >= self.switch_log_odds else None
 
     def switch(self, i: int) -> NDArray[np.float64]:
         """Make rival ``i`` the estimate: returns its transform ``G`` (move the cloud by it); the old estimate
@@ -346,11 +384,15 @@ class RivalBank:
         self.G = np.vstack([compose(self.G[others], g_inv[None]), g_inv[None]])
         self.L = np.concatenate([self.L[others] - li, [-li]])
         self.D = np.vstack([self.D[others] - self.D[i], -self.D[i]])
+        self.O = np.concatenate([self.O[1 + i][None], self.O[1:][others], self.O[:1]])
         self.scans = deque(((compose(g, p), z) for p, z in self.scans), maxlen=self.history)
+        if self.prev is not None:
+            self.prev = compose(g, self.prev)
         return g
 
     def clear(self) -> None:
         """Forget the rivals and the window (the estimate moved to a place the bank did not choose)."""
         self.scans.clear()
         self.G, self.L, self.D = np.empty((0, 3)), np.empty(0), np.empty((0, 0))
+        self.O, self.prev, self.prev_odom = np.zeros((1, self.k, 3)), None, None
         self.used = 0

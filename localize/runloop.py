@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from .estimate import Estimate
 from .geometry import compose
 from .grid import OccupancyGrid
-from .motion import odometry_pair
+from .motion import OdometryMotion, odometry_pair
 from .policies import (
     BeamMasks,
     Context,
@@ -493,11 +493,15 @@ def default_policies(mcl: Any, *, grid: OccupancyGrid | None = None, min_motion:
             p.expansion = Expansion((ex_xy, ex_th))
         if restart_after:
             p.restart = Restart(restart_after, mcl.kld.n_max if mcl.kld is not None else mcl.n)
-    _add_state(p, grid, sensor, state, sensor_reset)
+    # the rival bank's places move as the filter's particles do, when the filter's motion model reads odometry
+    odometric = isinstance(mcl.motion, OdometryMotion) or isinstance(getattr(mcl.motion, "base", None), OdometryMotion)
+    motion = mcl.motion if odometric else None
+    _add_state(p, grid, sensor, state, sensor_reset, motion)
     return p
 
 
-def _add_state(p: Policies, grid: OccupancyGrid | None, sensor: Any, state: str, sensor_reset: float) -> None:
+def _add_state(p: Policies, grid: OccupancyGrid | None, sensor: Any, state: str, sensor_reset: float,
+               motion: Any = None) -> None:
     """The state's policy (and sensor resetting, which reads its ``p_localized``) into ``p``."""
     if state not in ("thresholds", "probability"):
         raise ValueError(f"state must be 'thresholds' or 'probability'; got {state!r}")
@@ -510,7 +514,7 @@ def _add_state(p: Policies, grid: OccupancyGrid | None, sensor: Any, state: str,
             raise ValueError("sensor_reset needs state='probability': it draws particles while p_localized is low")
         p.state = ThresholdState(sensor, p.rules, p.evidence)
         return
-    p.state = ReliabilityState(grid, sensor, fit_distance=p.rules.fit_distance)
+    p.state = ReliabilityState(grid, sensor, fit_distance=p.rules.fit_distance, motion=motion)
     if sensor_reset > 0:
         bank = p.state.rivals                   # the same map and sensor: its blurred field serves the place search
         p.reset = SensorReset(grid, sensor, sensor_reset, p.state.lost_below,

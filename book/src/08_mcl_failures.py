@@ -658,16 +658,22 @@ assert trace[2] > 0.99 and 3 <= below <= 5
 # settled the cloud on one of them, the particle filter no longer holds the
 # other. `localize.rivals.RivalBank` keeps a handful of them: every few scans
 # it searches the whole map for the places where the newest scan fits best
-# (a coarse-to-fine search, `localize.placesearch`), and each place it keeps
-# is the estimate's own trajectory moved rigidly (a transform $G$ of the map:
-# if the estimate is at $x_t$, the rival puts the robot at $G \circ x_t$).
-# Every scan is scored at the estimate and at each rival with the sensor
-# model of chapter 6, and each rival keeps its log-odds against the estimate,
-# $L_i \leftarrow L_i + \ell_t(G_i \circ x_t) - \ell_t(x_t)$, over every
-# scan since the place was chosen: the histogram filter of chapter 2 again,
-# over a handful of places. The estimate's share of that posterior,
-# $1/(1 + \sum_i e^{L_i})$, is the third estimate of being right (a mirror
-# image that fits as well holds it at a half).
+# (a coarse-to-fine search, `localize.placesearch`). Each place it keeps,
+# the estimate's own among them, is a small particle filter of chapter 6 (48
+# particles), moved by the odometry with the motion model of chapter 4 and
+# weighed on every scan with the sensor model of chapter 5. A place scores a
+# scan by the mean likelihood of its particles: the particle filter's
+# estimate of $p(z_t \mid z_{1:t-1})$ if the robot is there. Each rival keeps
+# its log-odds against the estimate's place,
+# $L_i \leftarrow L_i + \log \hat p(z_t \mid \text{rival } i) - \log \hat p(z_t \mid \text{estimate})$,
+# over every scan since the place was chosen: the histogram filter of
+# chapter 2 again, over a handful of places, each of them tracked as the
+# cloud tracks the estimate. (A place scored at one pose would pay for every
+# centimetre between that pose and where its scans fit best; tracked, each
+# place follows its own scans, and none is favoured by how it is followed.)
+# The estimate's share of that posterior, $1/(1 + \sum_i e^{L_i})$, is the
+# third estimate of being right (a mirror image that fits as well holds it
+# at a half).
 #
 # How far should a sum of log-likelihood ratios be believed? Chapter 6's
 # models count a scan's beams as independent readings of an exact map, and
@@ -697,11 +703,13 @@ assert scales[0] > 0.8 and abs(scales[1] - 0.25) < 0.05     # about 1 and 1/4 (5
 # The rival bank keeps every rival's differences, scan by scan, and the
 # share believes each rival's odds by this factor (`RivalBank.believed`): a
 # place that loses a few nats at every scan is believed in full, one whose
-# differences swing by more than their mean much less. When a rival's odds
-# as they are (believed ones would move the cloud later, and keep a wrong
-# cloud longer) make it 19 times more probable than the estimate (the odds
+# differences swing by more than their mean much less. When a rival's
+# believed odds make it 19 times more probable than the estimate (the odds
 # of *localized*, 0.95) while the estimate itself still fits, the run loop
-# moves the cloud there by $G$, and
+# moves the cloud there (by the transform $G$ of the map that takes the
+# estimate to the rival's place; believed odds, because two places that no
+# scan tells apart gather differences of either sign, and their plain sum is
+# a random walk that reaches any odds in the end), and
 # the old place becomes a rival: the decision can be taken back by later
 # scans, which a restart that lands on the same look-alike again could not.
 #
@@ -912,7 +920,7 @@ print(check.injection(injection))
 # half turn about the hall's centre, `compose([12, 6, π], pose)`). Run it with
 # `runloop.run` and the policies of `default_policies(..., state="probability")`,
 # once as they are and once with `p.state = ReliabilityState(grid, lf,
-# rivals=False)`. At which step does the bank move the cloud (the run's
+# rivals=False, motion=f.motion)`. At which step does the bank move the cloud (the run's
 # events say), and what does `p_localized` say before the move? Without the
 # bank, what does the state say at the end, and how far off is the estimate?
 
@@ -932,7 +940,7 @@ for bank in (True, False):
     f5 = MCL.gaussian(compose([12.0, 6.0, np.pi], r5.poses[0]), (0.1, 0.1, 0.05), 1000,
                       OdometryMotion(r5.alphas, min_std=0.01), lf_tell, rng=np.random.default_rng(100), grid=tell_hall)
     p5 = default_policies(f5, grid=tell_hall, state="probability")
-    p5.state = ReliabilityState(tell_hall, lf_tell, rivals=bank)
+    p5.state = ReliabilityState(tell_hall, lf_tell, rivals=bank, motion=f5.motion)
     rec5 = Recorder()
     tr5 = rec5.trace(run(f5, len(r5.poses), r5.control, lambda k: (r5.ranges[k], fov), policies=p5, observers=[rec5]))
     e5 = position_error(tr5.poses, r5.poses)
