@@ -945,14 +945,18 @@ for bank in (True, False):
     tr5 = rec5.trace(run(f5, len(r5.poses), r5.control, lambda k: (r5.ranges[k], fov), policies=p5, observers=[rec5]))
     e5 = position_error(tr5.poses, r5.poses)
     moves = [k for k, text in tr5.events if "rival place" in text]
+    before = np.flatnonzero(tr5.state[:moves[0]] == "localized") if moves else []
     print(f"bank {'on ' if bank else 'off'}: moved at step {moves or 'never'}; p_localized before: "
           f"{np.round(tr5.p_localized[:moves[0] + 1], 2).tolist() if moves else '-'}; "
-          f"end: {tr5.state[-1]}, {e5[-1]:.1f} m off")
+          + (f"'localized' before it at steps {before.tolist()}, {e5[before].min():.0f}-{e5[before].max():.0f} m off; "
+             if len(before) else "")
+          + f"end: {tr5.state[-1]}, {e5[-1]:.1f} m off")
 # With the bank the filter doubts at first: the mirror image and the robot's place fit the first scans alike, so
-# the estimate's share is near a half. It rises to 0.92 at the fourth step, never to the 0.95 of *localized*, and
-# falls as the box comes into view: the robot's place wins and the cloud moves there. Whether it stays below 0.95
-# depends on how close the bank's rival is to the robot's place: a rival a few centimetres off loses nats at every
-# scan, and then the state can say "localized" at the mirror image, metres off (the strict xfail of
-# `tests/test_rivals.py`, a failure issue 43 still tracks).
+# the estimate's share is near a half. But the search finds the robot's place a few tenths of a metre off, and
+# the rival's particles take a few scans to reach it, losing nats on the way: `p_localized` rises above the 0.95
+# of *localized*, and the state says "localized" at the mirror image, metres off (the strict xfail of
+# `tests/test_rivals.py`, a failure issue 43 still tracks: a place's particles start where it was found). As the
+# box comes into view the robot's place wins those nats back and more, the share falls, and the cloud moves to
+# the robot's place.
 # Without the bank the cloud never leaves the mirror image, and the state ends "localized", metres off: a filter
 # cannot weigh a place it does not hold (deprivation, the first failure of this chapter).
