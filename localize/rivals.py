@@ -222,21 +222,22 @@ class RivalBank:
         self.used = 0
         self.motion = OdometryMotion() if motion is None else motion
         self.k = check_count(particles, "particles")
-        self.O = np.zeros((1, self.k, 3))                  # each hypothesis's particles (the estimate's first), as
-        self.prev: NDArray | None = None                   # offsets from its place; the estimate at the last scan
-        self.prev_odom: NDArray | None = None              # the odometry reading at the last scan
+        self.offsets = np.zeros((1, self.k, 3))            # each place's particles as poses relative to the place
+        self.prev: NDArray | None = None                   # (the estimate's first); the estimate at the last scan,
+        self.prev_odom: NDArray | None = None              # and the odometry reading then
 
     def hold(self, G: ArrayLike, L: ArrayLike, D: ArrayLike | None = None) -> None:
         """Hold the rivals ``G`` (``(R, 3)``) with log-odds ``L`` (``(R,)``) against the estimate, and their
         per-scan differences ``D`` (``(R, S)``, one column per scan the bank keeps; default: no record, NaN,
-        so that their odds are believed as they are). A rival placed by hand (a test, a caller's guess) starts here."""
+        so that their odds are believed as they are), each with a copy of the estimate's particles about its place.
+        A rival placed by hand (a test, a caller's guess) starts here."""
         G, L = np.atleast_2d(np.asarray(G, dtype=float)).reshape(-1, 3), np.asarray(L, dtype=float).reshape(-1)
         D = np.full((len(G), len(self.scans)), np.nan) if D is None else np.asarray(D, dtype=float)
         if len(L) != len(G) or D.shape != (len(G), len(self.scans)):
             raise ValueError(f"need G (R, 3), L (R,) and D (R, {len(self.scans)}: one column per scan kept); got "
                              f"{G.shape}, {L.shape} and {D.shape}")
         self.G, self.L, self.D = G, L, D
-        self.O = np.concatenate([self.O[:1], np.repeat(self.O[:1], len(G), axis=0)])
+        self.offsets = np.concatenate([self.offsets[:1], np.repeat(self.offsets[:1], len(G), axis=0)])
 
     @property
     def believed(self) -> NDArray[np.float64]:
@@ -282,7 +283,7 @@ class RivalBank:
         the scan (log), the estimate's first."""
         G = np.vstack([np.zeros((1, 3)), self.G])
         prev = pose if self.prev is None else self.prev
-        before = compose(compose(G, prev[None])[:, None, :], self.O).reshape(-1, 3)
+        before = compose(compose(G, prev[None])[:, None, :], self.offsets).reshape(-1, 3)
         if self.prev is None:
             moved = before
         elif odom is not None and self.prev_odom is not None:
@@ -300,13 +301,13 @@ class RivalBank:
         centre = np.array([mean_pose(q) for q in moved])                     # the rivals' places follow their
         centre[0] = places[0]                                                # particles; the estimate's is its own
         self.G = compose(centre[1:], inverse(pose)[None])
-        self.O = compose(inverse(centre)[:, None, :], moved)
+        self.offsets = compose(inverse(centre)[:, None, :], moved)
         self.prev = pose
         return m
 
     def _keep(self, mask: NDArray[np.bool_]) -> None:
         self.G, self.L, self.D = self.G[mask], self.L[mask], self.D[mask]
-        self.O = self.O[np.concatenate([[True], mask])]
+        self.offsets = self.offsets[np.concatenate([[True], mask])]
 
     def _scan_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None) -> NDArray[np.float64]:
         """Log-likelihood ``(H, S)`` of each of the window's scans (or ``scans``) for hypotheses ``(H, 3)`` (poses
@@ -361,9 +362,9 @@ class RivalBank:
         G = compose(hyps, inverse(pose)[None])
         order = [i for i in np.argsort(-L) if ok[i]]
         kept = distinct(hyps, order, self.n_rivals, self.radius, heading=np.inf)   # distinct places, the best first
-        O = np.concatenate([self.O[1:], np.repeat(self.O[:1], len(hyps) - n_old, axis=0)])
+        offsets = np.concatenate([self.offsets[1:], np.repeat(self.offsets[:1], len(hyps) - n_old, axis=0)])
         self.G, self.L, self.D = G[kept], L[kept], D[kept]
-        self.O = np.concatenate([self.O[:1], O[kept]])
+        self.offsets = np.concatenate([self.offsets[:1], offsets[kept]])
 
     def winner(self) -> int | None:
         """The rival that should take the estimate's place (odds of ``switch_odds`` or more, over at least a
@@ -384,7 +385,7 @@ class RivalBank:
         self.G = np.vstack([compose(self.G[others], g_inv[None]), g_inv[None]])
         self.L = np.concatenate([self.L[others] - li, [-li]])
         self.D = np.vstack([self.D[others] - self.D[i], -self.D[i]])
-        self.O = np.concatenate([self.O[1 + i][None], self.O[1:][others], self.O[:1]])
+        self.offsets = np.concatenate([self.offsets[1 + i][None], self.offsets[1:][others], self.offsets[:1]])
         self.scans = deque(((compose(g, p), z) for p, z in self.scans), maxlen=self.history)
         if self.prev is not None:
             self.prev = compose(g, self.prev)
@@ -394,5 +395,5 @@ class RivalBank:
         """Forget the rivals and the window (the estimate moved to a place the bank did not choose)."""
         self.scans.clear()
         self.G, self.L, self.D = np.empty((0, 3)), np.empty(0), np.empty((0, 0))
-        self.O, self.prev, self.prev_odom = np.zeros((1, self.k, 3)), None, None
+        self.offsets, self.prev, self.prev_odom = np.zeros((1, self.k, 3)), None, None
         self.used = 0

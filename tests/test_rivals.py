@@ -243,7 +243,7 @@ def test_each_place_moves_by_the_odometry_and_scores_the_mean_likelihood_of_its_
     bank.hold(compose(rival, inverse(x0))[None], [0.0], np.zeros((1, len(bank.scans))))
     bank.observe(x1, _z(grid, x1), odom1)                        # the estimate jumped beyond the odometry
     moved = compose(x0, np.array([0.4, 0.0, 0.05]))
-    assert np.allclose(compose(x1[None], bank.O[0]), moved[None], atol=1e-9)
+    assert np.allclose(compose(x1[None], bank.offsets[0]), moved[None], atol=1e-9)
     want = compose(rival, np.array([0.4, 0.0, 0.05]))
     assert np.allclose(bank.places(x1)[0], want, atol=1e-9)
     ll = lf.log_likelihood(np.vstack([moved, want]), *_z(grid, x1))
