@@ -72,9 +72,9 @@ estimate would leave *localized* possible at about a fifth of them (draw 0:
 the wrong claims fell from 74 to 55 when the bank believed its odds only as
 far as their spread supports them, to 43 when the margin between the
 thresholds was kept for the fit, and to 6 when the places were tracked (stop
-65). At three of those six (seed 8, scans 10-12) the robot's true pose fits
-the scans worse than the estimate under the filter's own sensor model (stop
-64), and no bank can help there.
+65). At five of those six the scans favour the wrong place under the
+filter's own sensor model (``benchmarks/why_wrong.py --demo 10``), and no
+bank can help there.
 
 This follows the reliability estimation of Akai et al. (*Reliable Monte Carlo
 localization for mobile robots*, 2023; als_ros), where a classifier's output
