@@ -77,7 +77,7 @@ def demo_run() -> LogRun:
     --------
     >>> r = demo_run()
     >>> str(r.trace.state[0]), str(r.trace.state[-1]), r.trace.first_localized()
-    ('searching', 'localized', 14)
+    ('searching', 'localized', 23)
     """
     from ..maps import office
     from ..sim import range_run
