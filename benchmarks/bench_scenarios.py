@@ -77,10 +77,8 @@ def judge(sc: S.Scenario, tr, excusing: str | None = None, survives: bool = Fals
     judged = np.ones(err.size, dtype=bool) if excuse is None else ~excuse
     loc = (state == "localized") & judged
     far = (err > T.FAR) & judged
-    k0 = np.flatnonzero(state == "localized")
-    near = (err <= T.NEAR) & (np.arange(err.size) >= (k0[0] if k0.size else err.size))
-    if exclude is not None:
-        near &= ~exclude
+    never = not np.any(state == "localized")                  # the tests' judged_near asserts it was localized
+    near = np.zeros(err.size, dtype=bool) if never else T.judged_near(state, err, exclude)
     row = {"loc": int(loc.sum()), "loc_off": int(np.sum(loc & far)), "p_high_off": int(np.sum(far & (p >= LOST_BELOW))),
            "near": int(near.sum()), "near_loc": int(np.sum(near & (state == "localized"))),
            "p_near": float(p[near].mean()) if near.any() else float("nan"),

@@ -156,7 +156,7 @@ def evidence_scale(d: ArrayLike) -> NDArray[np.float64]:
 
 
 class RivalBank:
-    """The estimate against the other places the robot could be, each the estimate's trajectory moved rigidly.
+    """The estimate against the other places the robot could be, each place tracked by particles of its own.
 
     Parameters
     ----------
@@ -297,9 +297,8 @@ class RivalBank:
         for h in range(len(G)):
             if np.isfinite(m[h]):
                 moved[h] = moved[h, systematic(np.exp(ll[h] - np.max(ll[h])), self.rng)]
-        places = compose(G, pose[None])
         centre = np.array([mean_pose(q) for q in moved])                     # the rivals' places follow their
-        centre[0] = places[0]                                                # particles; the estimate's is its own
+        centre[0] = pose                                                     # particles; the estimate's is its own
         self.G = compose(centre[1:], inverse(pose)[None])
         self.offsets = compose(inverse(centre)[:, None, :], moved)
         self.prev = pose
