@@ -59,6 +59,21 @@ outweigh one that has fitted many, and with a copy of the estimate's particles
 about its place. Every rival is hill-climbed on the window when the search
 runs, the estimate's place alike.
 
+The search over the whole map ranks places on the newest scan alone, and one
+scan can rank the robot's place below a dozen look-alikes: after a turn the
+odometry missed, the filter's estimate may settle a metre or two from the
+robot and turned by half a radian, and the robot's place fits the scans after
+it better by a few nats each, yet the newest scan alone does not single it out
+(``tests/test_state_scenarios.py``, the missing turn). So the search also looks
+around the estimate: poses 1.25 and 2 ``radius`` away in eight directions,
+turned by 0 and +-0.5 rad (the near misses that the evidence model's
+calibration counts as wrong, :func:`localize.reliability.calibrate`), ranked
+on the window by the coarse model of the search and climbed like the others.
+A near miss joins the bank only if the scans since the place was chosen fit
+it better than the estimate's place (odds above even): around any estimate
+lies a continuum of poses, and a slope of the estimate's own peak is no other
+place.
+
 When a rival's believed odds reach those the state calls *localized*
 (``LOCALIZED_AT``, 19 to 1 against the estimate) over at least a window of
 scans, the filter was on the wrong place:
@@ -107,6 +122,11 @@ __all__ = ["RivalBank", "evidence_scale"]
 #: Places the search finds per rival kept: the newest scan alone ranks many look-alikes alike (every corner of
 #: a room fits a scan of a corner); the window of scans ranks them again, and the best are kept.
 SEARCHED = 4
+
+#: The near misses searched around the estimate (:meth:`RivalBank.search`): distances in units of ``radius``, and
+#: the turn (radians) of the calibration's near misses (:func:`localize.reliability.calibration_fits`).
+NEAR_RINGS = (1.25, 2.0)
+NEAR_TURN = 0.5
 
 
 def _added(m: NDArray) -> NDArray[np.float64]:
@@ -308,25 +328,26 @@ class RivalBank:
         self.G, self.L, self.D = self.G[mask], self.L[mask], self.D[mask]
         self.offsets = self.offsets[np.concatenate([[True], mask])]
 
-    def _scan_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None) -> NDArray[np.float64]:
+    def _scan_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None, model: Any = None) -> NDArray[np.float64]:
         """Log-likelihood ``(H, S)`` of each of the window's scans (or ``scans``) for hypotheses ``(H, 3)`` (poses
         now) moved along ``shape`` (one pose per scan, in the frame of the estimate now)."""
         scans = list(self.scans)[-self.window:] if scans is None else scans
         ll = np.zeros((len(hyps), len(scans)))
         for j, (_, z) in enumerate(scans):
-            ll[:, j] = scores(self.sensor, compose(hyps, shape[j][None]), z)
+            ll[:, j] = scores(self.sensor if model is None else model, compose(hyps, shape[j][None]), z)
         return ll
 
-    def _window_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None) -> NDArray[np.float64]:
+    def _window_ll(self, hyps: NDArray, shape: NDArray, scans: list | None = None, model: Any = None) -> NDArray[np.float64]:
         """The sum of :meth:`_scan_ll` over the scans (added scan by scan)."""
-        return _added(self._scan_ll(hyps, shape, scans))
+        return _added(self._scan_ll(hyps, shape, scans, model))
 
     def _climb(self, hyps: NDArray, shape: NDArray, iterations: int = 8) -> tuple[NDArray, NDArray]:
         """Hill-climb each hypothesis on the window's log-likelihood (:func:`localize.placesearch.climb_on`)."""
         return climb_on(lambda p: self._window_ll(p, shape), hyps, stencil(0.25, 0.05, 4), iterations)
 
     def search(self, pose: NDArray) -> None:
-        """Hill-climb the rivals on the window, add the best new places for the newest scan, keep the best."""
+        """Hill-climb the rivals on the window, add the best new places for the newest scan and the near misses
+        around the estimate that the scans favour over it, keep the best."""
         z_now = self.scans[-1][1]
         every = np.array([p for p, _ in self.scans])
         shape = relative(pose, every[-self.window:])                          # the window in the current frame
@@ -338,6 +359,10 @@ class RivalBank:
             found = found[far]
         if len(found) > self.n_rivals:       # the places that fit the newest scan best, ranked on the window
             found = found[np.argsort(-self._window_ll(found, shape))[:self.n_rivals]]
+        near = self._near(pose)                # ranked on the window by the coarse model: they are climbed first
+        near = near[np.argsort(-self._window_ll(near, shape, model=self.coarse))[:self.n_rivals]]
+        n_near = len(near)
+        found = np.vstack([found, near])
         if len(old) + len(found) == 0:
             return
         hyps, ll = self._climb(np.vstack([pose[None], old, found]), shape)   # the estimate climbed alike
@@ -358,12 +383,22 @@ class RivalBank:
         L = np.concatenate([self.L, ll[n_old:] - est_ll])
         D = np.vstack([self.D, d_new])
         ok = np.isfinite(L) & (np.hypot(*(hyps[:, :2] - pose[:2]).T) >= self.radius)
+        ok[len(ok) - n_near:] &= L[len(L) - n_near:] > 0.0     # a near miss counts once the scans favour it
         G = compose(hyps, inverse(pose)[None])
         order = [i for i in np.argsort(-L) if ok[i]]
         kept = distinct(hyps, order, self.n_rivals, self.radius, heading=np.inf)   # distinct places, the best first
         offsets = np.concatenate([self.offsets[1:], np.repeat(self.offsets[:1], len(hyps) - n_old, axis=0)])
         self.G, self.L, self.D = G[kept], L[kept], D[kept]
         self.offsets = np.concatenate([self.offsets[:1], offsets[kept]])
+
+    def _near(self, pose: NDArray) -> NDArray[np.float64]:
+        """Poses beyond ``radius`` around the estimate, turned by up to half a radian: where the robot is if the
+        filter was carried away by its odometry (the near misses of :func:`localize.reliability.calibrate`)."""
+        b = np.arange(8) * np.pi / 4
+        d = self.radius * np.array(NEAR_RINGS)
+        h = np.array([-NEAR_TURN, 0.0, NEAR_TURN])
+        B, D, H = (a.ravel() for a in np.meshgrid(b, d, h, indexing="ij"))
+        return np.column_stack([pose[0] + D * np.cos(B), pose[1] + D * np.sin(B), pose[2] + H])
 
     def winner(self) -> int | None:
         """The rival that should take the estimate's place (odds of ``switch_odds`` or more, over at least a

@@ -658,7 +658,11 @@ assert trace[2] > 0.99 and 3 <= below <= 5
 # settled the cloud on one of them, the particle filter no longer holds the
 # other. `localize.rivals.RivalBank` keeps a handful of them: every few scans
 # it searches the whole map for the places where the newest scan fits best
-# (a coarse-to-fine search, `localize.placesearch`). Each place it keeps,
+# (a coarse-to-fine search, `localize.placesearch`), and around the
+# estimate itself, a metre or two away and turned by up to half a radian,
+# where the robot is if the odometry carried the filter off (one scan alone
+# can rank that place below a dozen look-alikes; it joins only once the
+# scans favour it over the estimate). Each place it keeps,
 # the estimate's own among them, is a small particle filter of chapter 6 (48
 # particles), moved by the odometry with the motion model of chapter 4 and
 # weighed on every scan with the sensor model of chapter 5. A place scores a
