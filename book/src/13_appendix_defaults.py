@@ -286,16 +286,18 @@ print(section or "benchmarks/RESULTS.md has no bench_global section yet")
 # place; deciding by the weight alone, the filter would jump there.
 #
 # What the table does show is honesty: no run ended "localized" while more
-# than 1 m off, and all 300 runs ended localized within 1 m of the robot. Of
-# the seven failures, three found it only after the first 30% of the run, and
-# four localized within it (three ACES runs within five scans) but did not
-# stay within the success band. The last column is stricter: two runs (one on
-# ACES, one on Willow) called a wrong place "localized" at some scans, 2 of the
-# 83,320 scans called localized in all (the table below it, scan by scan). The
+# than 1 m off, and 299 of the 300 runs ended localized within 1 m of the
+# robot; the other (Willow, start 5, seed 2) never found it and ends
+# "searching", as it should. Of the seven failures, three found the robot
+# only after the first 30% of the run, that one never did, and three ACES
+# runs localized within five scans but did not stay within the success band.
+# The last column is stricter: two runs (one on ACES, one on Willow) called a
+# wrong place "localized" at some scans, 6 of the 82,817 scans called
+# localized in all (the table below it, scan by scan). The
 # threshold state's run of the same draw calls more of them localized while
 # more than 1 m off (23), and says "localized" at only 93.9% of the scans
 # within 0.3 m of the truth (after the first localized scan), where the
-# probability says it at 98.4%: the threshold state is lost far more often
+# probability says it at 98.2%: the threshold state is lost far more often
 # while right. The next cell checks these
 # statements against the tables, so that a re-run of the benchmark cannot
 # silently contradict them.
@@ -312,11 +314,11 @@ if section:
         assert abs(rows[log_name]["success"] - rate) < 0.01, (log_name, rows[log_name])
     assert rows["aces"]["success"] == rows["willow"]["success"] == 57 / 60
     assert all(r["off"] == 0 for r in rows.values())
-    assert sum(int(cells[8]) for cells in table_rows(section).values()) == 300    # every run ended localized
+    assert sum(int(cells[8]) for cells in table_rows(section).values()) == 299    # all but one ended localized
     some_scan = {name: int(cells[10]) for name, cells in table_rows(section).items()}
     assert some_scan == {"intel": 0, "freiburg-079": 0, "aces": 1, "csail": 0, "willow": 1}, some_scan
     scans_section = table_rows(section, 1)["all"]   # the scan-by-scan table's row "all"
-    assert scans_section[2] == "83320" and scans_section[3].startswith("2 ") and "(98.4%)" in scans_section[5], \
+    assert scans_section[2] == "82817" and scans_section[3].startswith("6 ") and "(98.2%)" in scans_section[5], \
         scans_section
     thresholds = results_section("bench_global_state_thresholds")
     t_rows = {name: cells[2].split()[0] for name, cells in table_rows(thresholds).items()}
