@@ -112,7 +112,7 @@ from .geometry import compose, relative, wrap_angle
 from .grid import OccupancyGrid
 from .raycast import RayCaster
 from .resample import logsumexp
-from .rivals import RivalBank
+from .rivals import NEAR_TURN, RivalBank
 from .sensors import sensor_poses
 
 __all__ = ["EvidenceModel", "calibrate", "calibrate_once", "content_key", "calibration_fits", "simulate_scans", "look_alikes", "converged_error", "error_levels",
@@ -343,7 +343,7 @@ def _sample(grid: OccupancyGrid, sensor: Any, angles: ArrayLike, rng: np.random.
     typical = float(np.median(scans[valid])) if valid.any() else max_range
     r = np.sqrt(rng.uniform(radius ** 2, (4.0 * radius) ** 2, n))
     phi = rng.uniform(-np.pi, np.pi, n)
-    near = truth + np.column_stack([r * np.cos(phi), r * np.sin(phi), rng.uniform(-0.5, 0.5, n)])
+    near = truth + np.column_stack([r * np.cos(phi), r * np.sin(phi), rng.uniform(-NEAR_TURN, NEAR_TURN, n)])
     alike = look_alikes(grid, sensor, truth, np.where(valid, scans, np.inf), a, rng, radius)
     f_wrong = np.concatenate([scan_fits(caster, near, offset, scans, valid, a, fit_d, min_beams),
                               scan_fits(caster, alike, offset, scans, valid, a, fit_d, min_beams)])

@@ -124,7 +124,7 @@ __all__ = ["RivalBank", "evidence_scale"]
 SEARCHED = 4
 
 #: The near misses searched around the estimate (:meth:`RivalBank.search`): distances in units of ``radius``, and
-#: the turn (radians) of the calibration's near misses (:func:`localize.reliability.calibration_fits`).
+#: the largest turn (radians) of a near miss, the bank's and the calibration's (:func:`localize.reliability.calibration_fits`).
 NEAR_RINGS = (1.25, 2.0)
 NEAR_TURN = 0.5
 
