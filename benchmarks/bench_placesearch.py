@@ -11,6 +11,8 @@ lasers (a building drawn from its own seed, 25 poses each, scans ray-cast with
 (``pipeline.make_sensor`` with ``settings.DEFAULTS``; the beams kept by ``max_beams``).
 
     python benchmarks/bench_placesearch.py [--write]
+    python benchmarks/bench_placesearch.py --sigma 0.5 0.35 0.25 0.15 --draw 778   # the coarse model's blur, on
+                                                                                   # another draw of buildings
 
 To compare two versions of the search, run each checkout's own copy of this
 script: it measures the ``localize`` beside it (printed on stderr).
@@ -35,11 +37,13 @@ from _util import announce  # noqa: E402
 
 from localize import maps, pipeline, settings  # noqa: E402
 from localize.geometry import angle_diff  # noqa: E402
-from localize.placesearch import best_places, coarse_model  # noqa: E402
+from localize.placesearch import COARSE_SIGMA, best_places, coarse_model  # noqa: E402
 from localize.raycast import RayCaster  # noqa: E402
 
 POSES = 25
 N_BEST = 16
+#: The seed of the buildings' draw (the first entry of each building's seed; the reported table's).
+DRAW = 777
 
 
 def _model(grid, max_range: float):
@@ -67,21 +71,23 @@ def _search(grid, lf, coarse, truths, angles, rng) -> tuple[int, int, float]:
     return found, first, seconds
 
 
-def measure() -> list[dict]:
+def measure(sigma: float = COARSE_SIGMA, draw: int = DRAW) -> list[dict]:
+    """One row per building kind and laser, and one for ``bench_cli``'s map: the search with a coarse model
+    blurred by ``sigma`` (its lattice ``2 * sigma`` apart), on the buildings of the draw ``draw``."""
     rows = []
     for kind in bs.KINDS:
         for laser, (_, _, max_range) in bs.LASERS.items():
-            rng = np.random.default_rng([777, bs.KINDS.index(kind), list(bs.LASERS).index(laser)])
+            rng = np.random.default_rng([draw, bs.KINDS.index(kind), list(bs.LASERS).index(laser)])
             grid = bs.make_map(kind, rng)
             lf = _model(grid, max_range)
-            found, first, seconds = _search(grid, lf, coarse_model(grid, lf), grid.sample_free(POSES, rng),
+            found, first, seconds = _search(grid, lf, coarse_model(grid, lf, sigma), grid.sample_free(POSES, rng),
                                             bs.laser_angles(laser), rng)
             rows.append({"map": kind, "laser": laser, "poses": POSES, "found": found, "first": first,
                          "ms": 1000.0 * seconds / POSES})
-    rng = np.random.default_rng(16831)
+    rng = np.random.default_rng(16831 if draw == DRAW else [16831, draw])
     grid = maps.benchmark_map(800, 0.1)
     lf = _model(grid, 30.0)
-    found, first, seconds = _search(grid, lf, coarse_model(grid, lf), grid.sample_free(POSES, rng),
+    found, first, seconds = _search(grid, lf, coarse_model(grid, lf, sigma), grid.sample_free(POSES, rng),
                                     np.linspace(-np.pi / 2, np.pi / 2, 180), rng)
     rows.append({"map": "bench_cli (80 x 80 m)", "laser": "cmu-180", "poses": POSES, "found": found, "first": first,
                  "ms": 1000.0 * seconds / POSES})
@@ -102,12 +108,37 @@ def report(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def sweep(sigmas: list[float], draw: int) -> str:
+    """A table of the search with each coarse blur in ``sigmas``: found and first over the generated buildings,
+    and the time per search there and on ``bench_cli``'s map."""
+    lines = [f"Coarse blur against recall, on the buildings of draw {draw} ({POSES} poses per map and laser; found "
+             "and first as above; `python benchmarks/bench_placesearch.py --sigma ... --draw "
+             f"{draw}`).", "",
+             "| sigma (m) | lattice (m) | found, generated | first, generated | ms per search, generated | "
+             "found, bench_cli | ms per search, bench_cli |", "|---:|---:|---:|---:|---:|---:|---:|"]
+    for sigma in sigmas:
+        rows = measure(sigma, draw)
+        small, big = rows[:-1], rows[-1]
+        lines.append(f"| {sigma:g} | {2 * sigma:g} | {sum(r['found'] for r in small)} of "
+                     f"{sum(r['poses'] for r in small)} | {sum(r['first'] for r in small)} | "
+                     f"{np.mean([r['ms'] for r in small]):.1f} | {big['found']} of {big['poses']} | {big['ms']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--write", action="store_true", help="write the bench_placesearch section of RESULTS.md")
+    ap.add_argument("--sigma", type=float, nargs="+", metavar="M",
+                    help="instead of the table: recall and time with each of these coarse blurs (m)")
+    ap.add_argument("--draw", type=int, default=DRAW, help=f"the buildings' draw (default {DRAW}: the table's)")
     args = ap.parse_args(argv)
+    if args.write and (args.sigma or args.draw != DRAW):
+        ap.error("--write writes the default table: leave out --sigma and --draw")
     announce()
-    text = report(measure())
+    if args.sigma:
+        print(sweep(args.sigma, args.draw))
+        return 0
+    text = report(measure(draw=args.draw))
     print(text)
     if args.write:
         bg.write_section(text, "bench_placesearch")

@@ -646,11 +646,13 @@ assert trace[2] > 0.99 and 3 <= below <= 5
 # The run driver's `ReliabilityState` adds two things the scan's fit cannot
 # know: the particle filter's **own mass** near its estimate (a cloud spread
 # over two rooms is at most half sure of either), and a **probe**: the scan's
-# likelihood at the estimate against the estimate moved a metre forwards,
-# backwards, left and right, summed over the scans since the place was
-# chosen — a five-hypothesis histogram filter of chapter 2. In a featureless
+# likelihood at the estimate against the estimate moved by one, two, three
+# ... metres forwards, backwards, left and right, out to the laser's range,
+# summed over the scans since the place was chosen — a histogram filter of
+# chapter 2 over those poses (a pose in a wall drops out). In a featureless
 # corridor the scans never tell the estimate from the poses ahead and behind,
-# and the probe stays near a third.
+# and the probe's mass is shared by every stretch within the laser's reach:
+# with a 6 m laser and metre steps, one of thirteen.
 #
 # And a third thing: the **rivals**. A scan that fits the estimate well
 # says nothing about whether it would fit somewhere else as well: a room and
