@@ -649,7 +649,7 @@ assert trace[2] > 0.99 and 3 <= below <= 5
 # likelihood at the estimate against the estimate moved by one, two, three
 # ... metres forwards, backwards, left and right, out to the laser's range,
 # summed over the scans since the place was chosen — a histogram filter of
-# chapter 2 over those poses (a pose in a wall drops out). In a featureless
+# chapter 2 over those poses. In a featureless
 # corridor the scans never tell the estimate from the poses ahead and behind,
 # and the probe's mass is shared by every stretch within the laser's reach:
 # with a 6 m laser and metre steps, one of thirteen.
@@ -782,9 +782,10 @@ assert 0.7 < np.mean(rights[sure]) < 0.99                           # "sure" is 
 # masses); the state follows from those two columns and the two
 # thresholds alone. What the probability still
 # gets wrong is named by the state tests of `tests/test_state_scenarios.py`
-# (in a long featureless corridor, four rivals are not the corridor's continuum of
-# look-alikes) and measured on real logs and maps that none of this was
-# chosen on (`benchmarks/RESULTS.md`, `bench_global_state_probability`).
+# (in a long featureless corridor, the probe reaches only as far as the laser
+# sees, and four rivals are not the corridor's continuum of look-alikes) and
+# measured on real logs and maps that none of this was chosen on
+# (`benchmarks/RESULTS.md`, `bench_global_state_probability`).
 # The command line uses this state by default; `localize run --state
 # thresholds` brings back the fixed rules of `StateRules`, which do no better
 # on any of these cases. Chapter 9 adds
