@@ -31,8 +31,7 @@ fit never condemns a right estimate.
 (the default of ``localize run``, ``--state probability``; ``run_filter(..., state="probability")``):
 ``p_localized`` is the geometric mean of the belief and the particle filter's
 own mass near its estimate (the smallest of the weight within the radius, a
-probe of the poses whole metres ahead, behind and aside out to the laser's
-range, which a featureless corridor cannot pass, and the estimate's
+five-pose probe that a featureless corridor cannot pass, and the estimate's
 share against the look-alike places a :class:`~localize.rivals.RivalBank`
 keeps, which also moves the cloud to a rival that wins); *localized* from
 0.95, *lost* below 0.7, or as soon as the place part alone (the mass, the
@@ -41,10 +40,8 @@ fit, never another place.
 
 **Limits, measured** (``benchmarks/RESULTS.md``, ``bench_global_state_probability``,
 ``tests/test_state_scenarios.py`` and chapter 8). The bank holds a handful of
-look-alikes, not a continuum, and the probe reaches only as far as the laser:
-in a long featureless corridor ``p_localized`` reaches 0.36-0.51 far off
-(0.55-0.73 while the probe moved the estimate by one metre only, until stop
-67), though the state never says localized there (a
+look-alikes, not a continuum: in a long featureless corridor ``p_localized``
+reaches 0.55-0.73 far off, though the state never says localized there (a
 strict xfail; with the simulator's default laser, whose beams that hit nothing
 read a few centimetres short of the range and fit the corridor's far end, it
 said localized 21 m off: ``BeamModel``'s ``no_return``). In ``localize demo``'s
@@ -120,7 +117,7 @@ from .sensors import sensor_poses
 
 __all__ = ["EvidenceModel", "calibrate", "calibrate_once", "content_key", "calibration_fits", "simulate_scans", "look_alikes", "converged_error", "error_levels",
            "LocalizedBelief",
-           "ReliabilityState", "reliability_table", "probe_moves", "floor_text", "LOCALIZED_AT", "LOST_BELOW"]
+           "ReliabilityState", "reliability_table", "floor_text", "LOCALIZED_AT", "LOST_BELOW"]
 
 def floor_text(v: float, decimals: int) -> str:
     """``v`` written with ``decimals`` decimals, rounded down (empty for NaN): a threshold that is a multiple of
@@ -552,32 +549,6 @@ class LocalizedBelief:
         return self.p
 
 
-def probe_moves(shift: float, reach: float) -> NDArray[np.float64]:
-    """The probe's hypotheses as moves ``(1 + 4 K, 3)`` in the estimate's frame: none first, then ``shift`` times
-    1, 2, ... ``K`` forwards, backwards, left and right, ``K`` the most that stay within ``reach`` (at least one
-    each way; none at all for ``shift`` 0).
-
-    A pose farther than the sensor's range from the estimate sees other walls than the estimate's scan does: the
-    poses the scans could confuse with the estimate, the stretches of a corridor, lie within it (farther
-    look-alikes are :class:`~localize.rivals.RivalBank`'s).
-
-    Examples
-    --------
-    >>> m = probe_moves(1.0, 3.5)
-    >>> len(m), m[1:4, 0].tolist(), m[4:7, 0].tolist(), m[-1].tolist()
-    (13, [1.0, 2.0, 3.0], [-1.0, -2.0, -3.0], [0.0, -3.0, 0.0])
-    >>> probe_moves(0.0, 8.0).shape
-    (1, 3)
-    """
-    shift, reach = float(shift), float(reach)
-    if shift <= 0:
-        return np.zeros((1, 3))
-    k = shift * np.arange(1, max(1, int(reach // shift)) + 1)
-    o = np.zeros_like(k)
-    return np.vstack([np.zeros((1, 3)), np.column_stack([k, o, o]), np.column_stack([-k, o, o]),
-                      np.column_stack([o, k, o]), np.column_stack([o, -k, o])])
-
-
 def reliability_table(p: ArrayLike, right: ArrayLike, n_bins: int = 10, min_count: int = 1) -> list[tuple]:
     """``[(bin low, bin high, scans, mean p, share right), ...]``: a reliability diagram as rows.
 
@@ -620,9 +591,8 @@ class ReliabilityState:
       cluster won), the belief starts again from even odds;
     * ``m``: the filter's own mass near its estimate, the smaller of the share
       of the weight within ``right_radius`` of it and the share the scan itself
-      gives the estimate against the estimate moved by 1, 2, ... times
-      ``probe_shift`` metres forwards, backwards, left and right, out to the
-      sensor's range, under the sensor model (:attr:`probe_mass`: a cloud that
+      gives the estimate against the estimate moved by ``probe_shift`` metres
+      forwards, backwards, left and right under the sensor model (a cloud that
       resampling alone shrank onto one stretch of a featureless corridor has
       all its weight there, but the scan fits every stretch alike), and, with
       ``rivals`` (default), the estimate's share of the posterior against the
@@ -696,7 +666,7 @@ class ReliabilityState:
     localized_at, lost_below : float
         The documented thresholds on ``p_localized``.
     probe_shift : float
-        Metres between the probe's poses (:func:`probe_moves`); 0 leaves the probe out.
+        Metres; 0 leaves the probe out.
     seed : int
         Seed of the calibration's own generator (the filter's random stream is not touched).
     model : EvidenceModel, optional
@@ -724,8 +694,7 @@ class ReliabilityState:
         self.belief: LocalizedBelief | None = None if model is None else self._fresh(model)
         self.last_pose: NDArray | None = None
         self.last_p: float | None = None
-        self.probe_moves = probe_moves(self.probe_shift, float(sensor.max_range))
-        self.probe_ll = np.zeros(len(self.probe_moves))
+        self.probe_ll = np.zeros(5)
         self.caster = RayCaster(grid, float(sensor.max_range), method="march")
         self.occupied = grid.occupied
         self.offset = np.asarray(getattr(sensor, "sensor_offset", np.zeros(3)), dtype=float)
@@ -761,24 +730,21 @@ class ReliabilityState:
         return float(w[near].sum() / w.sum())
 
     def probe(self, step: Any) -> None:
-        """Add the scan's log-likelihood at the estimate and at each of its moves (:func:`probe_moves`), each
-        scored by the sensor model as any pose is (a move into a wall or off the map too: the scan judges it)."""
-        poses = compose(step.pose, self.probe_moves)
+        """Add the scan's log-likelihood at the estimate and at it moved by ``probe_shift`` in four directions."""
+        s = self.probe_shift
+        d = np.array([[0.0, 0.0, 0.0], [s, 0.0, 0.0], [-s, 0.0, 0.0], [0.0, s, 0.0], [0.0, -s, 0.0]])
         with np.errstate(divide="ignore", invalid="ignore"):
-            ll = np.asarray(self.sensor.log_likelihood(poses, *step.z), dtype=float)
-        if ll.shape == (len(poses),) and np.isfinite(ll[0]):
+            ll = np.asarray(self.sensor.log_likelihood(compose(step.pose, d), *step.z), dtype=float)
+        if ll.shape == (5,) and np.isfinite(ll[0]):
             self.probe_ll = self.probe_ll + np.where(np.isfinite(ll), ll, -np.inf)
 
     @property
     def probe_mass(self) -> float:
-        """The estimate's posterior against its moves (:func:`probe_moves`), over the scans since the place was
-        chosen.
+        """The estimate's posterior against the four moved poses, over the scans since the place was chosen.
 
-        A histogram filter (chapter 2) over the hypotheses "the robot is where the estimate says", or a whole
-        number of ``probe_shift`` ahead of it, behind, left or right, out to the sensor's range, with the
-        sensor model: in a featureless corridor the scans never tell the estimate from the poses ahead and
-        behind, and its mass is shared by every stretch of the corridor within the laser's reach (one of 13
-        with a 6 m laser and 1 m moves, ``tests/test_reliability.py``).
+        A histogram filter over five hypotheses ("the robot is where the estimate says", or a
+        ``probe_shift`` ahead, behind, left, right of it) with the sensor model: in a featureless corridor
+        the scans never tell the estimate from the poses ahead and behind, and this stays at a third.
         """
         if self.probe_shift <= 0:
             return 1.0
@@ -802,7 +768,7 @@ class ReliabilityState:
 
     def _new_place(self) -> None:
         self.belief = self._fresh(self.model)
-        self.probe_ll = np.zeros(len(self.probe_moves))
+        self.probe_ll = np.zeros(5)
         if self.rivals is not None:
             self.rivals.clear()
 
@@ -872,7 +838,7 @@ class ReliabilityState:
         g = self.rivals.switch(i)
         self.last_pose = compose(g, self.last_pose)   # the bank's move: not a jump that starts the bank again
         self.belief = self._fresh(self.model)
-        self.probe_ll = np.zeros(len(self.probe_moves))
+        self.probe_ll = np.zeros(5)
         return g
 
     def update(self, step: Any, ctx: Any) -> str:

@@ -264,10 +264,8 @@ def test_the_margin_forgives_a_poor_fit_but_not_another_place():
 
 
 def test_a_corridor_never_pins_the_estimate():
-    """Scans in a long featureless corridor fit the estimate moved along it as well: the probe's mass is shared
-    equally by the estimate and the poses 1-6 m ahead and behind (the laser's 6 m reach; a pose moved aside puts
-    the laser in a wall, and the scan says so), one of 13, however many scans come, and the state never says
-    localized. (The probe's first form, a metre ahead, behind and aside, held it at a third.)"""
+    """Scans in a long featureless corridor fit the estimate moved along it as well: the probe's mass stays near a
+    third (estimate, one metre ahead, one behind) however many scans come, and the state never says localized."""
     from localize.reliability import ReliabilityState
 
     g = OccupancyGrid.from_ascii("#" * 80 + "\n" + "." * 80 + "\n" + "." * 80 + "\n" + "#" * 80, resolution=0.25)
@@ -279,11 +277,7 @@ def test_a_corridor_never_pins_the_estimate():
     tight = (np.tile(pose, (50, 1)), np.full(50, -np.log(50)))
     for k in range(20):
         state.update(_Step(k, pose, tight, fit_scan=_scan_at(pose, lf, rng)), ctx)
-    assert state.probe_mass == pytest.approx(1 / 13, rel=0.05) and ctx.state == "searching"
-    w = np.exp(state.probe_ll - np.max(state.probe_ll))
-    w /= w.sum()
-    along = np.abs(state.probe_moves[:, 1]) == 0                  # the estimate, and the moves ahead and behind
-    assert along.sum() == 13 and w[~along].sum() < 0.01           # the moves aside put the laser in the walls
+    assert 0.2 < state.probe_mass < 0.45 and ctx.state == "searching"
 
 
 def test_no_evidence_from_inside_a_mapped_obstacle():

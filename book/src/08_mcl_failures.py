@@ -646,13 +646,11 @@ assert trace[2] > 0.99 and 3 <= below <= 5
 # The run driver's `ReliabilityState` adds two things the scan's fit cannot
 # know: the particle filter's **own mass** near its estimate (a cloud spread
 # over two rooms is at most half sure of either), and a **probe**: the scan's
-# likelihood at the estimate against the estimate moved by one, two, three
-# ... metres forwards, backwards, left and right, out to the laser's range,
-# summed over the scans since the place was chosen — a histogram filter of
-# chapter 2 over those poses. In a featureless
+# likelihood at the estimate against the estimate moved a metre forwards,
+# backwards, left and right, summed over the scans since the place was
+# chosen — a five-hypothesis histogram filter of chapter 2. In a featureless
 # corridor the scans never tell the estimate from the poses ahead and behind,
-# and the probe's mass is shared by every stretch within the laser's reach:
-# with a 6 m laser and metre steps, one of thirteen.
+# and the probe stays near a third.
 #
 # And a third thing: the **rivals**. A scan that fits the estimate well
 # says nothing about whether it would fit somewhere else as well: a room and
@@ -782,10 +780,9 @@ assert 0.7 < np.mean(rights[sure]) < 0.99                           # "sure" is 
 # masses); the state follows from those two columns and the two
 # thresholds alone. What the probability still
 # gets wrong is named by the state tests of `tests/test_state_scenarios.py`
-# (in a long featureless corridor, the probe reaches only as far as the laser
-# sees, and four rivals are not the corridor's continuum of look-alikes) and
-# measured on real logs and maps that none of this was chosen on
-# (`benchmarks/RESULTS.md`, `bench_global_state_probability`).
+# (in a long featureless corridor, four rivals are not the corridor's continuum of
+# look-alikes) and measured on real logs and maps that none of this was
+# chosen on (`benchmarks/RESULTS.md`, `bench_global_state_probability`).
 # The command line uses this state by default; `localize run --state
 # thresholds` brings back the fixed rules of `StateRules`, which do no better
 # on any of these cases. Chapter 9 adds
