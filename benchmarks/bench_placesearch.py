@@ -134,6 +134,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.write and (args.sigma or args.draw != DRAW):
         ap.error("--write writes the default table: leave out --sigma and --draw")
+    if args.sigma and not all(np.isfinite(v) and v > 0 for v in args.sigma):
+        ap.error(f"--sigma takes blurs in metres above 0; got {' '.join(f'{v:g}' for v in args.sigma)}")
     announce()
     if args.sigma:
         print(sweep(args.sigma, args.draw))
