@@ -102,10 +102,17 @@ def report(rows: list[dict]) -> str:
              "| map | laser | poses | found | first | ms per search |", "|---|---|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['map']} | {r['laser']} | {r['poses']} | {r['found']} | {r['first']} | {r['ms']:.1f} |")
-    small = rows[:-1]
-    lines.append(f"| all generated | | {sum(r['poses'] for r in small)} | {sum(r['found'] for r in small)} | "
-                 f"{sum(r['first'] for r in small)} | {np.mean([r['ms'] for r in small]):.1f} |")
+    g = _generated(rows)
+    lines.append(f"| all generated | | {g['poses']} | {g['found']} | {g['first']} | {g['ms']:.1f} |")
     return "\n".join(lines) + "\n"
+
+
+def _generated(rows: list[dict]) -> dict:
+    """The generated buildings' rows of :func:`measure` (all but ``bench_cli``'s map, the last) added up: poses, found
+    and first summed, milliseconds per search averaged."""
+    small = rows[:-1]
+    return {"poses": sum(r["poses"] for r in small), "found": sum(r["found"] for r in small),
+            "first": sum(r["first"] for r in small), "ms": float(np.mean([r["ms"] for r in small]))}
 
 
 def sweep(sigmas: list[float], draw: int) -> str:
@@ -118,10 +125,9 @@ def sweep(sigmas: list[float], draw: int) -> str:
              "found, bench_cli | ms per search, bench_cli |", "|---:|---:|---:|---:|---:|---:|---:|"]
     for sigma in sigmas:
         rows = measure(sigma, draw)
-        small, big = rows[:-1], rows[-1]
-        lines.append(f"| {sigma:g} | {2 * sigma:g} | {sum(r['found'] for r in small)} of "
-                     f"{sum(r['poses'] for r in small)} | {sum(r['first'] for r in small)} | "
-                     f"{np.mean([r['ms'] for r in small]):.1f} | {big['found']} of {big['poses']} | {big['ms']:.1f} |")
+        g, big = _generated(rows), rows[-1]
+        lines.append(f"| {sigma:g} | {2 * sigma:g} | {g['found']} of {g['poses']} | {g['first']} | {g['ms']:.1f} | "
+                     f"{big['found']} of {big['poses']} | {big['ms']:.1f} |")
     return "\n".join(lines) + "\n"
 
 
